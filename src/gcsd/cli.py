@@ -1,0 +1,86 @@
+"""The command line: ``gcsd [run [-c FILE]]``, ``gcsd check-config FILE``, ``gcsd --version``.
+
+`main` returns the exit code (the console script does ``sys.exit(main())``): 0 a clean stop or a
+good configuration, 2 a bad configuration or bad arguments, 1 any other failure. A bad
+configuration is reported as one ``FILE:LINE: key.path: what is wrong`` line per problem on
+stderr, and starts nothing. Each subcommand is one ``_<name>(args) -> int`` function in
+`_COMMANDS`; a new one (``status``) is a parser and an entry there.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import sys
+
+import structlog
+
+from gcsd import __version__
+from gcsd.config import ConfigError, default_config, load_config
+from gcsd.log import setup_logging
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_BAD_CONFIG = 2  # also argparse's code for bad arguments
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = _parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help and --version (0), bad arguments (2)
+        return exc.code if isinstance(exc.code, int) else EXIT_OK
+    return _COMMANDS[args.command or "run"](args)
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="gcsd", description="The vehicle side of MAVLink: a simulated or embedded vehicle that "
+                                 "ground stations connect to. With no command: run.")
+    parser.add_argument("--version", action="version", version=f"gcsd {__version__}")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND")
+    run = commands.add_parser("run", help="run in the foreground (the default command)")
+    run.add_argument("-c", "--config", metavar="FILE",
+                     help="configuration file (default: the built-in default, as config/gcsd.yaml)")
+    check = commands.add_parser("check-config", help="validate a configuration file and exit")
+    check.add_argument("file", metavar="FILE")
+    return parser
+
+
+def _run(args: argparse.Namespace) -> int:
+    config_file = getattr(args, "config", None)
+    try:
+        config = default_config() if config_file is None else load_config(config_file)
+    except ConfigError as exc:
+        _print_problems(exc)
+        return EXIT_BAD_CONFIG
+    setup_logging(config.log.level, config.log.format)
+    log = structlog.get_logger("gcsd.cli")
+    try:
+        from gcsd.app import run_daemon  # here, so that check-config needs nothing of the daemon
+
+        return asyncio.run(run_daemon(config))
+    except KeyboardInterrupt:  # the daemon handles SIGINT itself; this is a stop it did not see
+        log.warning("daemon_interrupted")
+        return EXIT_FAILURE
+    except Exception:
+        log.exception("daemon_failed")
+        return EXIT_FAILURE
+
+
+def _check_config(args: argparse.Namespace) -> int:
+    try:
+        load_config(args.file)
+    except ConfigError as exc:
+        _print_problems(exc)
+        return EXIT_BAD_CONFIG
+    print(f"{args.file}: ok")
+    return EXIT_OK
+
+
+def _print_problems(error: ConfigError) -> None:
+    for problem in error.problems:
+        print(problem, file=sys.stderr)
+
+
+_COMMANDS = {"run": _run, "check-config": _check_config}

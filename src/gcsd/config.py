@@ -1,0 +1,436 @@
+"""Configuration: a YAML file validated into frozen dataclasses.
+
+The text is *composed* into PyYAML nodes, not loaded, so every value keeps its line. A `_Reader`
+walks the nodes section by section; each check returns the value, or records a problem
+``FILE:LINE: key.path: what is wrong`` and returns the key's default, and the walk goes on. One
+pass finds every problem; `ConfigError` carries them all, sorted by line.
+
+Every key is optional. Unknown and duplicate keys are problems (the closest known key is
+suggested). A section or list that is null takes its default; a null scalar is a problem unless
+its default is null. Text values (names, addresses, paths, the key) are read from their source
+text, so ``address: 1:30`` is not YAML 1.1's sexagesimal 90. Defaults that depend on other keys
+(``vehicle.compid``: 191 for a companion, else 1; a serial channel's ``bandwidth``: baud // 10)
+are resolved by the dataclasses themselves. Relative paths stay relative to the working directory.
+"""
+
+from __future__ import annotations
+
+import difflib
+import os
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path, PurePath
+from types import MappingProxyType
+
+import yaml
+from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
+
+STREAM_NAMES = ("raw_sens", "ext_stat", "rc_chan", "raw_ctrl", "position",
+                "extra1", "extra2", "extra3", "params", "adsb")
+DEFAULT_STREAM_RATES_HZ = {"raw_sens": 2, "ext_stat": 2, "rc_chan": 5, "raw_ctrl": 0, "position": 2,
+                           "extra1": 5, "extra2": 5, "extra3": 2, "params": 10, "adsb": 0}
+VEHICLE_TYPES = ("copter", "plane", "rover", "sub", "tracker", "blimp", "companion")
+CHANNEL_TYPES = ("udp-server", "udp-client", "tcp-server", "tcp-client", "serial")
+CHANNEL_OPTIONS = ("no_forward", "no_stream_override", "unsigned_ok", "forward_bad_crc")
+LOG_LEVELS = ("debug", "info", "warning", "error")
+LOG_FORMATS = ("console", "json")
+
+MAX_CHANNELS = 10  # the SRn_* parameters have one digit, n = 0..9
+MAX_STREAM_RATE_HZ = 50
+MAX_SPEEDUP = 1000
+COMPANION_COMPID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
+SIGNING_KEY_HEX_CHARS = 64
+
+
+@dataclass(frozen=True)
+class Home:
+    lat: float = -35.363262
+    lon: float = 149.165237
+    alt: float = 584.0
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    type: str = "copter"
+    sysid: int = 1
+    compid: int | None = None  # None resolves to COMPANION_COMPID for a companion, else 1
+    count: int = 1
+    home: Home = Home()
+    speedup: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.compid is None:
+            object.__setattr__(self, "compid", COMPANION_COMPID if self.type == "companion" else 1)
+
+
+@dataclass(frozen=True)
+class GcsConfig:
+    sysid: int = 255
+    enforce_sysid: bool = False
+
+
+@dataclass(frozen=True)
+class FtpConfig:
+    root: str = "ftp"
+
+
+@dataclass(frozen=True)
+class SigningConfig:
+    key: bytes | None = None
+    require: bool = False
+
+
+@dataclass(frozen=True)
+class ChannelConfig:
+    name: str
+    type: str
+    address: tuple[str, int] | None = None  # udp and tcp types
+    device: str | None = None  # serial
+    baud: int = 115200
+    mavlink: int = 2
+    streams: Mapping[str, float] = field(default_factory=dict)  # Hz, merged over the defaults
+    options: frozenset[str] = frozenset()
+    private: bool = False
+    bandwidth: int | None = None  # bytes/s; None is unlimited, except serial: it resolves to baud // 10
+
+    def __post_init__(self) -> None:
+        # Any mapping given is merged over the defaults and frozen, so streams always has all ten.
+        object.__setattr__(self, "streams", MappingProxyType(
+            {name: float(self.streams.get(name, DEFAULT_STREAM_RATES_HZ[name])) for name in STREAM_NAMES}))
+        if self.bandwidth is None and self.type == "serial":
+            object.__setattr__(self, "bandwidth", self.baud // 10)
+
+
+@dataclass(frozen=True)
+class LogConfig:
+    level: str = "info"
+    format: str = "console"
+    tlog: str | None = None
+
+
+@dataclass(frozen=True)
+class Config:
+    vehicle: VehicleConfig = VehicleConfig()
+    state_dir: Path = Path("./gcsd-state")
+    params_file: Path | None = None
+    gcs: GcsConfig = GcsConfig()
+    ftp: FtpConfig = FtpConfig()
+    signing: SigningConfig = SigningConfig()
+    channels: tuple[ChannelConfig, ...] = (
+        ChannelConfig(name="gcs", type="udp-server", address=("0.0.0.0", 14550)),
+    )
+    log: LogConfig = LogConfig()
+
+
+class ConfigError(Exception):
+    """A configuration that must not start the daemon; `problems` lists every problem found."""
+
+    def __init__(self, problems: list[str]) -> None:
+        super().__init__("\n".join(problems))
+        self.problems = list(problems)
+
+
+def default_config() -> Config:
+    return Config()
+
+
+def load_config(path: str | os.PathLike) -> Config:
+    filename = os.fsdecode(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError([f"{filename}: cannot read: {getattr(exc, 'strerror', None) or exc}"]) from None
+    return parse_config(text, filename)
+
+
+def parse_config(text: str, filename: str = "<config>") -> Config:
+    try:
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
+        line = mark.line + 1 if mark else 1
+        what = getattr(exc, "problem", None) or exc
+        raise ConfigError([f"{filename}:{line}: invalid YAML: {what}"]) from None
+    if root is not None and not _is_null(root) and not isinstance(root, MappingNode):
+        raise ConfigError([f"{filename}:{_line(root)}: expected a mapping of sections at the top level, "
+                           f"got {_describe(root)}"])
+    reader = _Reader(filename)
+    config = _config(reader, reader.section(_Field(root, ""), _TOP_KEYS))
+    if reader.problems:
+        raise ConfigError([message for _, message in sorted(reader.problems, key=lambda p: p[0])])
+    return config
+
+
+# --- the schema, one function per section -------------------------------------------------------
+
+_TOP_KEYS = ("vehicle", "state_dir", "params_file", "gcs", "ftp", "signing", "channels", "log")
+_VEHICLE_KEYS = ("type", "sysid", "compid", "count", "home", "speedup")
+_CHANNEL_KEYS = ("name", "type", "address", "device", "baud", "mavlink", "streams", "options",
+                 "private", "bandwidth")
+_NETWORK_TYPES = tuple(t for t in CHANNEL_TYPES if t != "serial")
+_SIGNING_KEY = re.compile(f"[0-9a-fA-F]{{{SIGNING_KEY_HEX_CHARS}}}")
+_ADDRESS = re.compile(r"(?:\[(?P<ipv6>[^\]]+)\]|(?P<host>[^:\s\[\]]+)):(?P<port>[0-9]{1,5})", re.ASCII)
+
+
+def _config(r: _Reader, top: _Section) -> Config:
+    ftp = r.section(top["ftp"], ("root",))
+    log = r.section(top["log"], ("level", "format", "tlog"))
+    gcs = r.section(top["gcs"], ("sysid", "enforce_sysid"))
+    params_file = r.text(top["params_file"], None, nullable=True)
+    return Config(
+        vehicle=_vehicle(r, r.section(top["vehicle"], _VEHICLE_KEYS)),
+        state_dir=Path(r.text(top["state_dir"], "./gcsd-state")),
+        params_file=None if params_file is None else Path(params_file),
+        gcs=GcsConfig(sysid=r.integer(gcs["sysid"], 255, 1, 255),
+                      enforce_sysid=r.boolean(gcs["enforce_sysid"], False)),
+        ftp=FtpConfig(root=_ftp_root(r, ftp["root"])),
+        signing=_signing(r, r.section(top["signing"], ("key", "require"))),
+        channels=_channels(r, top["channels"]),
+        log=LogConfig(level=r.choice(log["level"], "info", LOG_LEVELS),
+                      format=r.choice(log["format"], "console", LOG_FORMATS),
+                      tlog=r.text(log["tlog"], None, nullable=True)),
+    )
+
+
+def _vehicle(r: _Reader, v: _Section) -> VehicleConfig:
+    vehicle_type = r.choice(v["type"], "copter", VEHICLE_TYPES)
+    sysid = r.integer(v["sysid"], 1, 1, 255)
+    compid = r.integer(v["compid"], None, 1, 255, nullable=True)
+    count = r.integer(v["count"], 1, 1, 250)
+    if sysid + count - 1 > 255:
+        r.problem(v["count"] if "count" in v else v["sysid"],
+                  f"the swarm's last sysid {sysid} + {count} - 1 = {sysid + count - 1} is above 255")
+    home = r.section(v["home"], ("lat", "lon", "alt"))
+    return VehicleConfig(
+        type=vehicle_type, sysid=sysid, compid=compid, count=count,
+        home=Home(lat=r.number(home["lat"], Home.lat, -90, 90),
+                  lon=r.number(home["lon"], Home.lon, -180, 180),
+                  alt=r.number(home["alt"], Home.alt, -1000, 100_000)),
+        speedup=r.number(v["speedup"], 1.0, 0, MAX_SPEEDUP, low_open=True),
+    )
+
+
+def _ftp_root(r: _Reader, f: _Field) -> str:
+    root = PurePath(r.text(f, "ftp"))
+    if root.is_absolute() or ".." in root.parts:
+        return r.reject(f, "a path relative to state_dir without '..'", "ftp")
+    return str(root)
+
+
+def _signing(r: _Reader, s: _Section) -> SigningConfig:
+    key = r.text(s["key"], None, nullable=True)
+    if key is not None and not _SIGNING_KEY.fullmatch(key):  # the message must not echo the key
+        got = f"{len(key)} characters" if len(key) != SIGNING_KEY_HEX_CHARS else "other characters"
+        r.problem(s["key"], f"expected {SIGNING_KEY_HEX_CHARS} hex characters or null, got {got}")
+        key = None
+    return SigningConfig(key=None if key is None else bytes.fromhex(key),
+                         require=r.boolean(s["require"], False))
+
+
+def _channels(r: _Reader, f: _Field) -> tuple[ChannelConfig, ...]:
+    if f.node is None or _is_null(f.node):
+        return Config.channels
+    if not isinstance(f.node, SequenceNode):
+        return r.reject(f, "a list of channels", Config.channels)
+    items = f.node.value
+    if not 1 <= len(items) <= MAX_CHANNELS:
+        r.problem(f, f"expected 1 to {MAX_CHANNELS} channels (SR0_ .. SR9_), got {len(items)}")
+    first_index_by_name: dict[str, int] = {}
+    channels = []
+    for index, item in enumerate(items):
+        section = r.section(_Field(item, f"{f.path}[{index}]"), _CHANNEL_KEYS)
+        channel = _channel(r, section)
+        if channel.name and channel.name in first_index_by_name:
+            first = f"{f.path}[{first_index_by_name[channel.name]}]"
+            r.problem(section["name"], f"duplicate channel name {channel.name!r} (also {first})")
+        first_index_by_name.setdefault(channel.name, index)
+        channels.append(channel)
+    return tuple(channels)
+
+
+def _channel(r: _Reader, c: _Section) -> ChannelConfig:
+    for key in ("name", "type"):
+        if key not in c and isinstance(c.node, MappingNode):
+            r.problem(c[key], "required for every channel")
+    channel_type = r.choice(c["type"], "", CHANNEL_TYPES)
+    serial, network = channel_type == "serial", channel_type in _NETWORK_TYPES
+    address = device = None
+    if "address" in c and serial:
+        r.problem(c["address"], "not used by serial channels (use device and baud)")
+    elif "address" in c:
+        address = _address(r, c["address"])
+    elif network:
+        r.problem(c["address"], f"required for type {channel_type}")
+    for key in ("device", "baud"):
+        if key in c and network:
+            r.problem(c[key], "only used by serial channels")
+    if "device" in c:
+        device = r.text(c["device"], None)
+    elif serial:
+        r.problem(c["device"], "required for type serial")
+    streams = r.section(c["streams"], STREAM_NAMES)
+    return ChannelConfig(
+        name=r.text(c["name"], ""), type=channel_type, address=address, device=device,
+        baud=r.integer(c["baud"], 115200, 1),
+        mavlink=r.integer(c["mavlink"], 2, 1, 2),
+        streams={name: r.number(streams[name], float(DEFAULT_STREAM_RATES_HZ[name]), 0, MAX_STREAM_RATE_HZ)
+                 for name in STREAM_NAMES},
+        options=frozenset(r.choice(o, "", CHANNEL_OPTIONS) for o in r.sequence(c["options"])) - {""},
+        private=r.boolean(c["private"], False),
+        bandwidth=r.integer(c["bandwidth"], None, 1, nullable=True),
+    )
+
+
+def _address(r: _Reader, f: _Field) -> tuple[str, int] | None:
+    text = r.text(f, None)
+    match = _ADDRESS.fullmatch(text) if text is not None else None
+    if text is not None and match is None:
+        r.problem(f, f"expected HOST:PORT, got {text!r}")
+    elif match is not None and int(match["port"]) > 65535:
+        r.problem(f, f"port must be 0..65535, got {int(match['port'])}")
+    elif match is not None:
+        return match["ipv6"] or match["host"], int(match["port"])
+    return None
+
+
+# --- the reader: nodes in, values or problems out ---------------------------------------------
+
+_NULL_TAG = "tag:yaml.org,2002:null"
+_STR_TAG = "tag:yaml.org,2002:str"
+_NOT_A_SCALAR = object()
+
+
+@dataclass(frozen=True)
+class _Field:
+    """A key's value node (None when the key is absent) and its key path, for messages."""
+
+    node: Node | None
+    path: str
+    parent: Node | None = None  # the mapping, to give a line to problems about absent keys
+
+
+class _Section:
+    """The known keys of one mapping; unknown and duplicate keys were reported when it was read."""
+
+    def __init__(self, node: Node | None, path: str, nodes: dict[str, Node]) -> None:
+        self.node, self.path, self.nodes = node, path, nodes
+
+    def __getitem__(self, key: str) -> _Field:
+        return _Field(self.nodes.get(key), f"{self.path}.{key}" if self.path else key, self.node)
+
+    def __contains__(self, key: str) -> bool:  # present in the file
+        return key in self.nodes
+
+
+class _Reader:
+    def __init__(self, filename: str) -> None:
+        self.filename = filename
+        self.problems: list[tuple[int, str]] = []
+        self._constructor = yaml.constructor.SafeConstructor()
+
+    def problem(self, f: _Field, message: str) -> None:
+        node = f.node if f.node is not None else f.parent
+        line = _line(node) if node is not None else 1
+        self.problems.append((line, f"{self.filename}:{line}: {f.path}: {message}"))
+
+    def reject(self, f: _Field, wanted: str, default):
+        self.problem(f, f"expected {wanted}, got {_describe(f.node)}")
+        return default
+
+    def section(self, f: _Field, known: tuple[str, ...]) -> _Section:
+        if f.node is not None and not _is_null(f.node) and not isinstance(f.node, MappingNode):
+            self.reject(f, "a mapping", None)
+        if not isinstance(f.node, MappingNode):
+            return _Section(f.node, f.path, {})
+        nodes: dict[str, Node] = {}
+        for key_node, value_node in f.node.value:
+            key = key_node.value if isinstance(key_node, ScalarNode) else "?"
+            key_field = _Field(key_node, f"{f.path}.{key}" if f.path else key)
+            if key not in known:
+                self.problem(key_field, _unknown_key(key, known))
+            elif key in nodes:
+                self.problem(key_field, "duplicate key")
+            else:
+                nodes[key] = value_node
+        return _Section(f.node, f.path, nodes)
+
+    def sequence(self, f: _Field) -> list[_Field]:
+        if f.node is None or _is_null(f.node):
+            return []
+        if not isinstance(f.node, SequenceNode):
+            return self.reject(f, "a list", [])
+        return [_Field(item, f"{f.path}[{i}]") for i, item in enumerate(f.node.value)]
+
+    def scalar(self, node: Node):
+        if not isinstance(node, ScalarNode):
+            return _NOT_A_SCALAR
+        try:
+            return self._constructor.construct_object(node)
+        except (yaml.YAMLError, ValueError):
+            return _NOT_A_SCALAR
+
+    def checked(self, f: _Field, default, wanted: str, is_good, *, nullable: bool = False):
+        """The YAML value of a scalar if `is_good(value)`, else a problem and the default."""
+        if f.node is None or (nullable and _is_null(f.node)):
+            return default
+        value = self.scalar(f.node)
+        if value is _NOT_A_SCALAR or not is_good(value):
+            return self.reject(f, wanted + (" or null" if nullable else ""), default)
+        return value
+
+    def integer(self, f: _Field, default, low: int, high: int | None = None, *, nullable: bool = False):
+        wanted = f"an integer {low}..{high}" if high is not None else f"an integer >= {low}"
+        return self.checked(f, default, wanted, lambda v: type(v) is int and low <= v
+                            and (high is None or v <= high), nullable=nullable)
+
+    def number(self, f: _Field, default: float, low: float, high: float, *, low_open: bool = False) -> float:
+        wanted = f"a number > {low} and <= {high}" if low_open else f"a number {low}..{high}"
+        return float(self.checked(f, default, wanted, lambda v: type(v) in (int, float)
+                                  and (low < v if low_open else low <= v) and v <= high))
+
+    def boolean(self, f: _Field, default: bool) -> bool:
+        return self.checked(f, default, "true or false", lambda v: type(v) is bool)
+
+    def text(self, f: _Field, default, *, nullable: bool = False):
+        """The source text of a scalar, whatever YAML would make of it; empty text is a problem."""
+        if f.node is None or (nullable and _is_null(f.node)):
+            return default
+        if not isinstance(f.node, ScalarNode) or _is_null(f.node) or not f.node.value:
+            return self.reject(f, "a non-empty string" + (" or null" if nullable else ""), default)
+        return f.node.value
+
+    def choice(self, f: _Field, default: str, choices: tuple[str, ...]) -> str:
+        value = self.text(f, None)
+        if value is None:
+            return default
+        if value not in choices:
+            self.problem(f, f"expected {'|'.join(choices)}, got {value!r}{_suggestion(value, choices)}")
+            return default
+        return value
+
+
+def _unknown_key(key: str, known: tuple[str, ...]) -> str:
+    return "unknown key" + (_suggestion(key, known) or f" (known keys: {', '.join(known)})")
+
+
+def _suggestion(word: str, known: tuple[str, ...]) -> str:
+    close = difflib.get_close_matches(word, known, n=1)
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
+def _is_null(node: Node) -> bool:
+    return isinstance(node, ScalarNode) and node.tag == _NULL_TAG
+
+
+def _line(node: Node) -> int:
+    return node.start_mark.line + 1
+
+
+def _describe(node: Node | None) -> str:
+    """A value as a message shows it: 'text', 300, true, null, a list, a mapping."""
+    if node is None or _is_null(node):
+        return "null"
+    if not isinstance(node, ScalarNode):
+        return "a mapping" if isinstance(node, MappingNode) else "a list"
+    return repr(node.value) if node.tag == _STR_TAG else node.value
