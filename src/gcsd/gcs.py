@@ -1,0 +1,142 @@
+"""The GCS object: the composition root. It wires channels, the router and the local
+components (one VehicleNode per simulated vehicle) and handles no message itself.
+
+Receive path for every good frame on a channel: mark the channel active (anything but
+RADIO_STATUS), ask the router (learn, forward, process locally?), write the raw frame to the
+chosen channels, then hand the decoded message to the local component(s) it is for. Frames with
+a bad CRC are dropped and counted, or, on a `forward_bad_crc` channel, forwarded unchanged as
+broadcasts and never processed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+import structlog
+
+from .channel import Channel
+from .clock import Clock
+from .codec import Frame
+from .config import Config
+from .node import VehicleNode
+from .router import MSG_ID_HEARTBEAT, MSG_ID_RADIO, MSG_ID_RADIO_STATUS, Router
+from .sim import VehicleState
+from .transport import run_channel
+from .vehicles import vehicle_type
+
+log = structlog.get_logger("gcsd.gcs")
+
+STATS_INTERVAL_S = 10.0
+PEER_SWEEP_INTERVAL_S = 1.0
+
+
+class GCS:
+    def __init__(self, config: Config, clock: Clock | None = None) -> None:
+        self.config = config
+        self.clock = clock or Clock()
+        now = self.clock.now
+        self.channels = [Channel(i, c, now) for i, c in enumerate(config.channels)]
+        self._wakeups = [asyncio.Event() for _ in self.channels]
+        self.active: set[int] = set()
+        self.opened: set[int] = set()
+        self.all_open = asyncio.Event()
+        vcfg = config.vehicle
+        vtype = vehicle_type(vcfg.type)
+        self.nodes = [
+            VehicleNode(
+                vcfg.sysid + i, vcfg.compid, vtype,
+                VehicleState(
+                    lat=vcfg.home.lat, lon=vcfg.home.lon, alt_amsl_m=vcfg.home.alt,
+                    home_lat=vcfg.home.lat, home_lon=vcfg.home.lon, home_alt_m=vcfg.home.alt,
+                    mode=vtype.initial_mode,
+                ),
+                self.clock, self.channels, self.wake,
+                gcs_sysid=config.gcs.sysid, enforce_gcs_sysid=config.gcs.enforce_sysid, speedup=vcfg.speedup,
+            )
+            for i in range(vcfg.count)
+        ]
+        self._by_sysid = {n.sysid: n for n in self.nodes}
+        self.router = Router({(n.sysid, n.compid) for n in self.nodes}, [ch.policy for ch in self.channels])
+        self.bad_crc_forwarded = 0
+        for ch in self.channels:
+            ch.on_frame = self.on_frame
+            ch.on_bad_crc = self.on_bad_crc
+        self._last_sweep_s = 0.0
+
+    def wake(self, channel: Channel) -> None:
+        self._wakeups[channel.index].set()
+
+    # --- receive ---------------------------------------------------------------------------
+    def on_frame(self, channel: Channel, frame: Frame) -> None:
+        now = self.clock.now()
+        msgid = frame.msgid
+        if msgid != MSG_ID_RADIO_STATUS and msgid != MSG_ID_RADIO and channel.index not in self.active:
+            channel.active = True
+            self.active.add(channel.index)
+        decision = self.router.decide(
+            channel.index, msgid, frame.sysid, frame.compid, frame.target_system, frame.target_component,
+            now, self.active, frame.msg is not None,
+            frame.msg.type if msgid == MSG_ID_HEARTBEAT and frame.msg is not None else None,
+        )
+        if decision.out_channels:
+            raw = frame.raw
+            channels = self.channels
+            for index in decision.out_channels:
+                channels[index].write(raw)
+        if decision.process_locally and frame.msg is not None:
+            for node in self._nodes_for(frame.target_system, frame.target_component):
+                node.handle(channel, frame, now)
+
+    def _nodes_for(self, target_system: int, target_component: int) -> list[VehicleNode]:
+        if target_system > 0:
+            node = self._by_sysid.get(target_system)
+            return [node] if node is not None else []
+        if target_component > 0:
+            return [n for n in self.nodes if n.compid == target_component] or self.nodes
+        return self.nodes
+
+    def on_bad_crc(self, channel: Channel, raw: bytes) -> None:
+        for index in self.router._broadcast_channels(channel.index):
+            self.channels[index].write(raw)
+        self.bad_crc_forwarded += 1
+
+    # --- send ------------------------------------------------------------------------------
+    def send_pass(self, channel: Channel, now: float) -> float | None:
+        if channel.config.type == "udp-server" and now - self._last_sweep_s > PEER_SWEEP_INTERVAL_S:
+            self._last_sweep_s = now
+            for gone in channel.forget_silent_peers(now):
+                log.info("peer_forgotten", channel=channel.name, peer=f"{gone[0]}:{gone[1]}")
+        deadline = None
+        for node in self.nodes:
+            d = node.send_pass(channel, now)
+            if d is not None and (deadline is None or d < deadline):
+                deadline = d
+        return deadline
+
+    # --- run -------------------------------------------------------------------------------
+    def _opened(self, channel: Channel) -> None:
+        self.opened.add(channel.index)
+        if len(self.opened) == len(self.channels):
+            self.all_open.set()
+
+    async def run(self, stop: asyncio.Event) -> None:
+        """Serve every channel until `stop` is set."""
+        async with asyncio.TaskGroup() as tg:
+            tasks = [
+                tg.create_task(run_channel(ch, self.send_pass, self._wakeups[ch.index], self._opened), name=ch.name)
+                for ch in self.channels
+            ]
+            tasks.append(tg.create_task(self._log_stats(), name="stats"))
+            await stop.wait()
+            for task in tasks:
+                task.cancel()
+
+    async def _log_stats(self) -> None:
+        while True:
+            await asyncio.sleep(STATS_INTERVAL_S)
+            for ch in self.channels:
+                log.info("channel_stats", channel=ch.name, **ch.snapshot())
+            log.info("routes_learned", routes=len(self.router.table), not_learned=self.router.table.not_learned)
+
+    def stats(self) -> dict[str, dict[str, int]]:
+        return {ch.name: ch.snapshot() for ch in self.channels}

@@ -1,0 +1,207 @@
+"""Routing between channels: ArduPilot's rules (MAVLink_routing.cpp), as a pure function.
+
+The route table learns (sysid, compid, channel) from every good frame on every channel, up to
+MAX_ROUTES entries. Better than ArduPilot: when the table is full, the route seen least recently
+is replaced if it has been silent for STALE_S, instead of new nodes being ignored forever.
+
+`decide()` answers, for one received frame, "process it locally?" and "copy it to which
+channels?". It never touches a socket or a clock; `now` is passed in. Rules, in order:
+
+1. A frame from one of our own components (a loop) is ignored and not learned.
+2. The source is learned (not sysid 0, not our own components, not our sysid with compid 0).
+3. RADIO_STATUS / RADIO are processed locally and never forwarded.
+4. HEARTBEAT goes to every active channel that is not private or no_forward, not the ingress
+   channel, and has no route to the same (sysid, compid) already (a node is never told about
+   itself). Processed locally.
+5. Frames from a private or no_forward channel are never forwarded.
+6. Exactly addressed to one of our components: processed locally, not forwarded.
+7. Otherwise, per route on another channel: a broadcast (target system 0 or absent) goes to
+   every channel with a route; a targeted frame goes to the channels where the target system was
+   seen (and the target component, when the target system is ours). A private channel only gets
+   frames addressed exactly to a node seen on it; a no_forward channel gets nothing.
+8. Processed locally if it was addressed to us, or nothing was forwarded and the target system
+   is ours, or it was a broadcast.
+
+Unknown message ids (no target field can be read) are forwarded as broadcasts and not processed.
+Never out of the ingress channel; at most one copy per channel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+MAX_ROUTES = 20
+STALE_S = 30.0
+MSG_ID_HEARTBEAT = 0
+MSG_ID_RADIO_STATUS = 109
+MSG_ID_RADIO = 166
+
+
+@dataclass(slots=True)
+class Route:
+    sysid: int
+    compid: int
+    channel: int
+    mavtype: int | None
+    last_seen_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class ChannelPolicy:
+    """What routing may do with a channel (from its configuration)."""
+
+    private: bool = False
+    no_forward: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    process_locally: bool
+    out_channels: tuple[int, ...] = ()
+
+
+IGNORE = Decision(False)
+
+
+class RouteTable:
+    """Learned routes keyed by (sysid, compid, channel); bounded, with stale replacement."""
+
+    def __init__(self, max_routes: int = MAX_ROUTES, stale_s: float = STALE_S) -> None:
+        self._routes: dict[tuple[int, int, int], Route] = {}
+        self.max_routes = max_routes
+        self.stale_s = stale_s
+        self.not_learned = 0  # new nodes refused because the table was full of live routes
+
+    def __len__(self) -> int:
+        return len(self._routes)
+
+    def __iter__(self):
+        return iter(self._routes.values())
+
+    def learn(self, sysid: int, compid: int, channel: int, now: float, mavtype: int | None = None) -> None:
+        key = (sysid, compid, channel)
+        route = self._routes.get(key)
+        if route is not None:
+            route.last_seen_s = now
+            if route.mavtype is None:
+                route.mavtype = mavtype
+            return
+        if len(self._routes) >= self.max_routes and not self._evict_stale(now):
+            self.not_learned += 1
+            return
+        self._routes[key] = Route(sysid, compid, channel, mavtype, now)
+
+    def _evict_stale(self, now: float) -> bool:
+        oldest = min(self._routes.values(), key=lambda r: r.last_seen_s)
+        if now - oldest.last_seen_s < self.stale_s:
+            return False
+        del self._routes[(oldest.sysid, oldest.compid, oldest.channel)]
+        return True
+
+    def has(self, sysid: int, compid: int, channel: int) -> bool:
+        return (sysid, compid, channel) in self._routes
+
+    def channels_with_routes(self) -> set[int]:
+        return {r.channel for r in self._routes.values()}
+
+
+class Router:
+    """The routing decision for one process: our local components and each channel's policy."""
+
+    def __init__(self, local: set[tuple[int, int]], policies: list[ChannelPolicy], table: RouteTable | None = None):
+        self.local = frozenset(local)
+        self.local_sysids = frozenset(s for s, _ in local)
+        self.policies = list(policies)
+        self.table = table if table is not None else RouteTable()
+
+    def decide(
+        self,
+        in_channel: int,
+        msgid: int,
+        sysid: int,
+        compid: int,
+        target_system: int,
+        target_component: int,
+        now: float,
+        active_channels: set[int] | frozenset[int] = frozenset(),
+        known_message: bool = True,
+        mavtype: int | None = None,
+    ) -> Decision:
+        if (sysid, compid) in self.local:
+            return IGNORE
+        if sysid != 0 and not (sysid in self.local_sysids and compid == 0):
+            self.table.learn(sysid, compid, in_channel, now, mavtype)
+        if msgid == MSG_ID_RADIO_STATUS or msgid == MSG_ID_RADIO:
+            return Decision(True)
+        policy_in = self.policies[in_channel]
+        closed_in = policy_in.private or policy_in.no_forward
+        if msgid == MSG_ID_HEARTBEAT:
+            if closed_in:
+                return Decision(True)
+            return Decision(True, self._heartbeat_channels(in_channel, sysid, compid, active_channels))
+        if not known_message:
+            if closed_in:
+                return IGNORE
+            return Decision(False, self._broadcast_channels(in_channel))
+
+        broadcast_system = target_system <= 0
+        broadcast_component = target_component <= 0
+        match_system = broadcast_system or target_system in self.local_sysids
+        addressed_to_us = match_system and (
+            broadcast_component or self._local_compid(target_system, target_component, broadcast_system)
+        )
+        if closed_in:
+            return Decision(addressed_to_us)
+        if not broadcast_system and not broadcast_component and (target_system, target_component) in self.local:
+            return Decision(True)
+
+        out: list[int] = []
+        for route in self.table:
+            ch = route.channel
+            if ch == in_channel or ch in out:
+                continue
+            policy = self.policies[ch]
+            if policy.no_forward:
+                continue
+            if policy.private:
+                if (target_system, target_component) == (route.sysid, route.compid):
+                    out.append(ch)
+                continue
+            if broadcast_system or (
+                target_system == route.sysid
+                and (
+                    broadcast_component
+                    or target_component == route.compid
+                    or target_system not in self.local_sysids
+                )
+            ):
+                out.append(ch)
+        process = addressed_to_us or (not out and match_system) or broadcast_system
+        return Decision(process, tuple(out))
+
+    def _local_compid(self, target_system: int, target_component: int, broadcast_system: bool) -> bool:
+        if broadcast_system:
+            return any(c == target_component for _, c in self.local)
+        return (target_system, target_component) in self.local
+
+    def _heartbeat_channels(self, in_channel: int, sysid: int, compid: int, active: set[int] | frozenset[int]):
+        table = self.table
+        return tuple(
+            ch
+            for ch in sorted(active)
+            if ch != in_channel
+            and not self.policies[ch].private
+            and not self.policies[ch].no_forward
+            and not table.has(sysid, compid, ch)
+        )
+
+    def _broadcast_channels(self, in_channel: int) -> tuple[int, ...]:
+        return tuple(
+            ch
+            for ch in sorted(self.table.channels_with_routes())
+            if ch != in_channel and not self.policies[ch].private and not self.policies[ch].no_forward
+        )
+
+    def local_channels_for(self, sysid: int) -> set[int]:
+        """Channels where a component of `sysid` other than ours was seen (send_to_components)."""
+        return {r.channel for r in self.table if r.sysid == sysid and (r.sysid, r.compid) not in self.local}

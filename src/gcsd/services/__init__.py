@@ -1,0 +1,40 @@
+"""Services of a local MAVLink component. Each declares the messages it handles by naming
+methods `handle_<MESSAGE_NAME>` and the commands it handles in `commands()`; the node builds
+its dispatch tables from them, so no service is ever reached through an if-chain."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Callable
+
+if TYPE_CHECKING:
+    from ..channel import Channel
+    from ..codec import Frame
+
+
+@dataclass(frozen=True, slots=True)
+class Incoming:
+    """A decoded message addressed to us, with where it came from and when."""
+
+    msg: Any
+    frame: "Frame"
+    channel: "Channel"
+    now: float
+
+    @property
+    def sender(self) -> tuple[int, int]:
+        return self.frame.sysid, self.frame.compid
+
+
+class Service:
+    capabilities: int = 0  # MAV_PROTOCOL_CAPABILITY bits this service implements
+
+    def commands(self) -> dict[int, Callable]:
+        return {}
+
+    def message_handlers(self) -> dict[str, Callable[[Incoming], None]]:
+        return {
+            name[len("handle_"):]: getattr(self, name)
+            for name in dir(self)
+            if name.startswith("handle_") and name[len("handle_"):].isupper()
+        }

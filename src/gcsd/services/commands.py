@@ -1,0 +1,107 @@
+"""COMMAND_LONG and COMMAND_INT: one dispatch table, exactly one COMMAND_ACK per command.
+
+COMMAND_LONG is turned into the same CommandRequest as COMMAND_INT (frame
+GLOBAL_RELATIVE_ALT; x/y are params 5/6, scaled by 1e7 for the commands that carry a location),
+as ArduPilot does. A handler returns a MAV_RESULT; the ACK (progress 0, targeted at the sender)
+is sent after the handler, so whatever the handler sends (MESSAGE_INTERVAL) precedes it. Unknown
+commands get UNSUPPORTED; a handler that raises gets FAILED and the error is logged; nothing is
+de-duplicated by `confirmation` (a resent command is executed again, as in ArduPilot).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import structlog
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from . import Incoming, Service
+
+log = structlog.get_logger("gcsd.commands")
+
+LOCATION_COMMANDS = frozenset({
+    M.MAV_CMD_DO_SET_HOME, M.MAV_CMD_DO_SET_ROI, M.MAV_CMD_DO_SET_ROI_LOCATION, M.MAV_CMD_DO_REPOSITION,
+    M.MAV_CMD_EXTERNAL_POSITION_ESTIMATE, getattr(M, "MAV_CMD_DO_SET_GLOBAL_ORIGIN", 611),
+})
+IMPLIED_FRAME = {
+    M.MAV_CMD_DO_SET_HOME: M.MAV_FRAME_GLOBAL,
+    M.MAV_CMD_DO_SET_ROI: M.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    M.MAV_CMD_DO_SET_ROI_LOCATION: M.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+}
+
+
+@dataclass(frozen=True, slots=True)
+class CommandRequest:
+    command: int
+    params: tuple[float, float, float, float]  # param1..param4
+    x: float  # param5 (lat degE7 for location commands)
+    y: float  # param6
+    z: float  # param7
+    frame: int
+    is_int: bool
+    inc: Incoming
+
+    @property
+    def param1(self) -> float:
+        return self.params[0]
+
+    @property
+    def param2(self) -> float:
+        return self.params[1]
+
+    @property
+    def param3(self) -> float:
+        return self.params[2]
+
+    @property
+    def param4(self) -> float:
+        return self.params[3]
+
+
+def _scale_e7(v: float) -> int:
+    return 0 if math.isnan(v) else int(v * 1e7)
+
+
+class CommandService(Service):
+    capabilities = M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+
+    def __init__(self, node, table: dict[int, Callable[[CommandRequest], int]]) -> None:
+        self.node = node
+        self.table = table
+        self.unsupported = 0
+
+    def handle_COMMAND_LONG(self, inc: Incoming) -> None:
+        m = inc.msg
+        cmd = m.command
+        x, y = m.param5, m.param6
+        frame = M.MAV_FRAME_GLOBAL_RELATIVE_ALT
+        if cmd in LOCATION_COMMANDS:
+            if cmd not in IMPLIED_FRAME:
+                self._ack(inc, cmd, M.MAV_RESULT_UNSUPPORTED)  # needs COMMAND_INT to say its frame
+                return
+            frame = IMPLIED_FRAME[cmd]
+            x, y = _scale_e7(x), _scale_e7(y)
+        self._run(CommandRequest(cmd, (m.param1, m.param2, m.param3, m.param4), x, y, m.param7, frame, False, inc))
+
+    def handle_COMMAND_INT(self, inc: Incoming) -> None:
+        m = inc.msg
+        self._run(CommandRequest(m.command, (m.param1, m.param2, m.param3, m.param4), m.x, m.y, m.z, m.frame, True, inc))
+
+    def _run(self, req: CommandRequest) -> None:
+        handler = self.table.get(req.command)
+        if handler is None:
+            self.unsupported += 1
+            result = M.MAV_RESULT_UNSUPPORTED
+        else:
+            try:
+                result = handler(req)
+            except Exception:
+                log.exception("command_failed", command=req.command, channel=req.inc.channel.name)
+                result = M.MAV_RESULT_FAILED
+        self._ack(req.inc, req.command, result)
+
+    def _ack(self, inc: Incoming, command: int, result: int) -> None:
+        sysid, compid = inc.sender
+        self.node.reply(inc.channel, M.MAVLink_command_ack_message(command, result, 0, 0, sysid, compid))

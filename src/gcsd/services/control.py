@@ -1,0 +1,111 @@
+"""Vehicle control common to every vehicle type: arm/disarm, modes, home, banner, GCS presence.
+
+ARM_DISARM (REFERENCE.md section 10): param1 1 arms (already armed -> ACCEPTED; param2 21196 or
+2989 skips the checks; a failed check -> FAILED with "Arm: ..." / "PreArm: ..." text), param1 0
+disarms (already disarmed -> ACCEPTED; 21196 forces it); anything else -> UNSUPPORTED. A mode
+change is accepted for a mode number the vehicle type knows, and pushes a HEARTBEAT at once on
+every link so ground stations see it without waiting.
+"""
+
+from __future__ import annotations
+
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from . import Incoming, Service
+from .commands import CommandRequest
+
+FORCE_MAGIC = (21196, 2989)
+_ACCEPTED, _DENIED, _FAILED, _UNSUPPORTED = (
+    M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_DENIED, M.MAV_RESULT_FAILED, M.MAV_RESULT_UNSUPPORTED,
+)
+
+
+class ControlService(Service):
+    def __init__(self, node) -> None:
+        self.node = node
+        self.gcs_last_seen_s: float | None = None
+
+    def commands(self):
+        return {
+            M.MAV_CMD_COMPONENT_ARM_DISARM: self.arm_disarm,
+            M.MAV_CMD_DO_SET_MODE: self.do_set_mode,
+            M.MAV_CMD_GET_HOME_POSITION: self.get_home_position,
+            M.MAV_CMD_DO_SEND_BANNER: self.send_banner,
+        }
+
+    def handle_HEARTBEAT(self, inc: Incoming) -> None:
+        if inc.frame.sysid == self.node.gcs_sysid:
+            self.gcs_last_seen_s = inc.now
+
+    def handle_SET_MODE(self, inc: Incoming) -> None:
+        m = inc.msg
+        if m.target_system == self.node.sysid and m.base_mode & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            self._set_mode(m.custom_mode)
+
+    # --- commands --------------------------------------------------------------------------
+    def arm_disarm(self, req: CommandRequest) -> int:
+        forced = int(req.param2) in FORCE_MAGIC
+        if req.param1 == 1:
+            return self._arm(forced)
+        if req.param1 == 0:
+            return self._disarm(forced)
+        return _UNSUPPORTED
+
+    def _arm(self, forced: bool) -> int:
+        node = self.node
+        state = node.state
+        if state.armed:
+            return _ACCEPTED
+        if not forced:
+            failures = node.prearm_failures()
+            if failures:
+                for text in failures:
+                    node.send_text(M.MAV_SEVERITY_CRITICAL, f"PreArm: {text}")
+                return _FAILED
+            if not node.vehicle.can_arm_in(state.mode):
+                node.send_text(M.MAV_SEVERITY_CRITICAL, "Arm: Mode not armable")
+                return _FAILED
+        state.armed = True
+        node.send_text(M.MAV_SEVERITY_INFO, "Arming motors")
+        node.push_heartbeat()
+        return _ACCEPTED
+
+    def _disarm(self, forced: bool) -> int:
+        node = self.node
+        state = node.state
+        if not state.armed:
+            return _ACCEPTED
+        if not forced and state.relative_alt_m > 0.5:
+            node.send_text(M.MAV_SEVERITY_CRITICAL, "Disarm: vehicle is flying; use force to disarm")
+            return _FAILED
+        state.armed = False
+        node.send_text(M.MAV_SEVERITY_INFO, "Disarming motors")
+        node.push_heartbeat()
+        return _ACCEPTED
+
+    def do_set_mode(self, req: CommandRequest) -> int:
+        if not int(req.param1) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            return _UNSUPPORTED
+        return _ACCEPTED if self._set_mode(int(req.param2)) else _FAILED
+
+    def _set_mode(self, number: int) -> bool:
+        node = self.node
+        if number not in node.vehicle.modes:
+            node.send_text(M.MAV_SEVERITY_WARNING, f"Mode change to {number} failed: unknown mode")
+            return False
+        if node.state.mode != number:
+            node.state.mode = number
+            node.push_heartbeat()
+        return True
+
+    def get_home_position(self, req: CommandRequest) -> int:
+        if not self.node.state.has_home:
+            return _FAILED
+        link = self.node.link(req.inc.channel)
+        link.push(M.MAVLINK_MSG_ID_HOME_POSITION)
+        link.push(M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
+        return _ACCEPTED
+
+    def send_banner(self, req: CommandRequest) -> int:
+        self.node.send_banner()
+        return _ACCEPTED

@@ -1,0 +1,250 @@
+"""Telemetry producers: one function per message id, reading the vehicle state. A table.
+
+`PRODUCERS[msgid](node, channel, now)` returns the message to send, or None when there is
+nothing to say (no home yet, a MAVLink2-only message on a MAVLink1 link...). Which ids a
+channel sends and how often is the scheduler's business; what they contain is decided here.
+A message id without a producer cannot be streamed or requested (SET_MESSAGE_INTERVAL: DENIED).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Callable
+
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from .codec import MAVLink_message
+
+if TYPE_CHECKING:
+    from .channel import Channel
+    from .node import VehicleNode
+
+Producer = Callable[["VehicleNode", "Channel", float], MAVLink_message | None]
+
+FLIGHT_SW_VERSION = (4 << 24) | (7 << 16) | (0 << 8) | M.FIRMWARE_VERSION_TYPE_DEV
+SENSORS = (
+    M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL | M.MAV_SYS_STATUS_SENSOR_3D_MAG
+    | M.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE | M.MAV_SYS_STATUS_SENSOR_GPS
+    | M.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL | M.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+    | M.MAV_SYS_STATUS_SENSOR_YAW_POSITION | M.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+    | M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL | M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+    | M.MAV_SYS_STATUS_AHRS | M.MAV_SYS_STATUS_SENSOR_BATTERY
+)
+
+
+def _e7(deg: float) -> int:
+    return int(round(deg * 1e7))
+
+
+def heartbeat(node, channel, now):
+    s = node.state
+    v = node.vehicle
+    return M.MAVLink_heartbeat_message(
+        v.mav_type, M.MAV_AUTOPILOT_ARDUPILOTMEGA, v.base_mode(s), s.mode, v.system_status(s), 3
+    )
+
+
+def sys_status(node, channel, now):
+    s = node.state
+    return M.MAVLink_sys_status_message(
+        SENSORS, SENSORS, SENSORS, 100, int(s.battery_voltage_v * 1000), int(s.current_a * 100),
+        s.battery_remaining_pct, 0, node.parse_error_count(), 0, 0, 0, 0,
+    )
+
+
+def power_status(node, channel, now):
+    return M.MAVLink_power_status_message(5000, 5000, M.MAV_POWER_STATUS_BRICK_VALID)
+
+
+def meminfo(node, channel, now):
+    return M.MAVLink_meminfo_message(65535, 65535, 1 << 20)
+
+
+def gps_raw_int(node, channel, now):
+    s = node.state
+    cog = int(s.heading_deg * 100) if s.groundspeed_ms > 0.2 else 65535
+    return M.MAVLink_gps_raw_int_message(
+        node.time_usec(now), s.gps_fix_type, _e7(s.lat), _e7(s.lon), int(s.alt_amsl_m * 1000),
+        int(s.hdop * 100), int(s.hdop * 150), int(s.groundspeed_ms * 100), cog, s.satellites,
+    )
+
+
+def global_position_int(node, channel, now):
+    s = node.state
+    return M.MAVLink_global_position_int_message(
+        node.time_boot_ms(now), _e7(s.lat), _e7(s.lon), int(s.alt_amsl_m * 1000), int(s.relative_alt_m * 1000),
+        int(s.vn_ms * 100), int(s.ve_ms * 100), int(s.vd_ms * 100), int(s.heading_deg * 100) % 36000,
+    )
+
+
+def local_position_ned(node, channel, now):
+    s = node.state
+    north = math.radians(s.lat - s.home_lat) * 6378137.0
+    east = math.radians(s.lon - s.home_lon) * 6378137.0 * math.cos(math.radians(s.home_lat))
+    return M.MAVLink_local_position_ned_message(
+        node.time_boot_ms(now), north, east, -s.relative_alt_m, s.vn_ms, s.ve_ms, s.vd_ms
+    )
+
+
+def attitude(node, channel, now):
+    s = node.state
+    return M.MAVLink_attitude_message(node.time_boot_ms(now), s.roll_rad, s.pitch_rad, s.yaw_rad, 0.0, 0.0, 0.0)
+
+
+def ahrs2(node, channel, now):
+    s = node.state
+    return M.MAVLink_ahrs2_message(s.roll_rad, s.pitch_rad, s.yaw_rad, s.alt_amsl_m, _e7(s.lat), _e7(s.lon))
+
+
+def simstate(node, channel, now):
+    s = node.state
+    return M.MAVLink_simstate_message(s.roll_rad, s.pitch_rad, s.yaw_rad, 0, 0, -9.81, 0, 0, 0, _e7(s.lat), _e7(s.lon))
+
+
+def vfr_hud(node, channel, now):
+    s = node.state
+    return M.MAVLink_vfr_hud_message(
+        s.groundspeed_ms, s.groundspeed_ms, int(s.heading_deg), s.throttle_pct, s.relative_alt_m, -s.vd_ms
+    )
+
+
+def system_time(node, channel, now):
+    return M.MAVLink_system_time_message(int(node.clock.wall() * 1e6), node.time_boot_ms(now))
+
+
+def battery_status(node, channel, now):
+    s = node.state
+    cells = [int(s.battery_voltage_v * 1000 / 4)] * 4 + [65535] * 6
+    return M.MAVLink_battery_status_message(
+        0, M.MAV_BATTERY_FUNCTION_ALL, M.MAV_BATTERY_TYPE_LIPO, 32767, cells, int(s.current_a * 100),
+        int(s.consumed_mah), -1, s.battery_remaining_pct,
+    )
+
+
+def raw_imu(node, channel, now):
+    return M.MAVLink_raw_imu_message(node.time_usec(now), 0, 0, -1000, 0, 0, 0, 200, 0, 400)
+
+
+def scaled_imu2(node, channel, now):
+    return M.MAVLink_scaled_imu2_message(node.time_boot_ms(now), 0, 0, -1000, 0, 0, 0, 200, 0, 400)
+
+
+def scaled_pressure(node, channel, now):
+    s = node.state
+    press_hpa = 1013.25 * (1 - 2.25577e-5 * s.alt_amsl_m) ** 5.25588
+    return M.MAVLink_scaled_pressure_message(node.time_boot_ms(now), press_hpa, 0.0, 2500)
+
+
+def servo_output_raw(node, channel, now):
+    pwm = 1000 + 10 * node.state.throttle_pct
+    return M.MAVLink_servo_output_raw_message(node.time_usec(now) & 0xFFFFFFFF, 0, pwm, pwm, pwm, pwm, 0, 0, 0, 0)
+
+
+def _rc_values():
+    return [1500, 1500, 1000, 1500, 1100, 1100, 1100, 1100]
+
+
+def rc_channels(node, channel, now):
+    return M.MAVLink_rc_channels_message(node.time_boot_ms(now), 8, *_rc_values(), *([0] * 10), 255)
+
+
+def rc_channels_raw(node, channel, now):
+    if not channel.mavlink1:
+        return None  # ArduPilot only emits the legacy message on MAVLink1 links
+    return M.MAVLink_rc_channels_raw_message(node.time_boot_ms(now), 0, *_rc_values(), 255)
+
+
+def nav_controller_output(node, channel, now):
+    s = node.state
+    return M.MAVLink_nav_controller_output_message(
+        math.degrees(s.roll_rad), math.degrees(s.pitch_rad), int(s.heading_deg), int(s.heading_deg), 0, 0, 0, 0
+    )
+
+
+def mission_current(node, channel, now):
+    return M.MAVLink_mission_current_message(0, 0, M.MISSION_STATE_NO_MISSION, 0)
+
+
+def ahrs(node, channel, now):
+    return M.MAVLink_ahrs_message(0, 0, 0, 0, 0, 0, 0)
+
+
+def wind(node, channel, now):
+    return M.MAVLink_wind_message(0.0, 0.0, 0.0)
+
+
+def ekf_status_report(node, channel, now):
+    flags = (
+        M.EKF_ATTITUDE | M.EKF_VELOCITY_HORIZ | M.EKF_VELOCITY_VERT | M.EKF_POS_HORIZ_REL
+        | M.EKF_POS_HORIZ_ABS | M.EKF_POS_VERT_ABS | M.EKF_PRED_POS_HORIZ_REL | M.EKF_PRED_POS_HORIZ_ABS
+    )
+    return M.MAVLink_ekf_status_report_message(flags, 0.01, 0.01, 0.01, 0.01, 0.0)
+
+
+def vibration(node, channel, now):
+    return M.MAVLink_vibration_message(node.time_usec(now), 0.1, 0.1, 0.1, 0, 0, 0)
+
+
+def home_position(node, channel, now):
+    s = node.state
+    if not s.has_home:
+        return None
+    return M.MAVLink_home_position_message(
+        _e7(s.home_lat), _e7(s.home_lon), int(s.home_alt_m * 1000), 0, 0, 0, [1, 0, 0, 0], 0, 0, 0,
+        node.time_usec(now),
+    )
+
+
+def gps_global_origin(node, channel, now):
+    s = node.state
+    if not s.has_home:
+        return None
+    return M.MAVLink_gps_global_origin_message(_e7(s.home_lat), _e7(s.home_lon), int(s.home_alt_m * 1000), node.time_usec(now))
+
+
+def autopilot_version(node, channel, now):
+    caps = node.capabilities()
+    if not channel.mavlink1:
+        caps |= M.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    return M.MAVLink_autopilot_version_message(
+        caps, FLIGHT_SW_VERSION, 0, 0, 0, b"gcsd\0\0\0\0", b"\0" * 8, b"\0" * 8, 0, 0, 0, [0] * 18
+    )
+
+
+def extended_sys_state(node, channel, now):
+    s = node.state
+    landed = M.MAV_LANDED_STATE_IN_AIR if s.relative_alt_m > 0.5 else M.MAV_LANDED_STATE_ON_GROUND
+    return M.MAVLink_extended_sys_state_message(M.MAV_VTOL_STATE_UNDEFINED, landed)
+
+
+PRODUCERS: dict[int, Producer] = {
+    M.MAVLINK_MSG_ID_HEARTBEAT: heartbeat,
+    M.MAVLINK_MSG_ID_SYS_STATUS: sys_status,
+    M.MAVLINK_MSG_ID_POWER_STATUS: power_status,
+    M.MAVLINK_MSG_ID_MEMINFO: meminfo,
+    M.MAVLINK_MSG_ID_GPS_RAW_INT: gps_raw_int,
+    M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: global_position_int,
+    M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: local_position_ned,
+    M.MAVLINK_MSG_ID_ATTITUDE: attitude,
+    M.MAVLINK_MSG_ID_AHRS2: ahrs2,
+    M.MAVLINK_MSG_ID_SIMSTATE: simstate,
+    M.MAVLINK_MSG_ID_VFR_HUD: vfr_hud,
+    M.MAVLINK_MSG_ID_SYSTEM_TIME: system_time,
+    M.MAVLINK_MSG_ID_BATTERY_STATUS: battery_status,
+    M.MAVLINK_MSG_ID_RAW_IMU: raw_imu,
+    M.MAVLINK_MSG_ID_SCALED_IMU2: scaled_imu2,
+    M.MAVLINK_MSG_ID_SCALED_PRESSURE: scaled_pressure,
+    M.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: servo_output_raw,
+    M.MAVLINK_MSG_ID_RC_CHANNELS: rc_channels,
+    M.MAVLINK_MSG_ID_RC_CHANNELS_RAW: rc_channels_raw,
+    M.MAVLINK_MSG_ID_NAV_CONTROLLER_OUTPUT: nav_controller_output,
+    M.MAVLINK_MSG_ID_MISSION_CURRENT: mission_current,
+    M.MAVLINK_MSG_ID_AHRS: ahrs,
+    M.MAVLINK_MSG_ID_WIND: wind,
+    M.MAVLINK_MSG_ID_EKF_STATUS_REPORT: ekf_status_report,
+    M.MAVLINK_MSG_ID_VIBRATION: vibration,
+    M.MAVLINK_MSG_ID_HOME_POSITION: home_position,
+    M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: gps_global_origin,
+    M.MAVLINK_MSG_ID_AUTOPILOT_VERSION: autopilot_version,
+    M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: extended_sys_state,
+}
