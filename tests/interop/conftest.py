@@ -338,8 +338,9 @@ def gcsd_daemon(tmp_path: Path, spawn) -> Iterator[Callable[..., GcsdDaemon]]:
             env_overrides={"PYTHONPATH": os.pathsep.join(pythonpath)},
         )
         daemon = GcsdDaemon(process, config_path, config)
-        daemons.append(daemon)
+        # Failing here reports the start-up; the spawn fixture still stops the process.
         _wait_until_channels_open(daemon, _server_channel_names(config), GCSD_START_TIMEOUT_S)
+        daemons.append(daemon)
         return daemon
 
     yield start

@@ -1,0 +1,1 @@
+"""Real third-party ground stations (MAVProxy, MAVSDK) against the real gcsd daemon."""
