@@ -1,0 +1,92 @@
+"""Shared fixtures: the real daemon in a background thread, on ephemeral loopback ports.
+
+`daemon(yaml_text_or_dict)` builds a Config from YAML (so tests use the same validation as
+users), starts the GCS in its own thread and event loop, waits until every channel is open and
+returns a `RunningDaemon` with `.port(name)` and `.stats()` (the channels' public counters). At
+teardown the daemon is stopped and its thread joined. Clients are blocking pymavlink
+connections, which is why the daemon gets its own loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from pathlib import Path
+
+import pytest
+import yaml
+
+from gcsd.config import parse_config
+from gcsd.gcs import GCS
+
+START_TIMEOUT_S = 5.0
+
+
+class RunningDaemon:
+    def __init__(self, config) -> None:
+        self.config = config
+        self.gcs: GCS | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop: asyncio.Event | None = None
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._main, name="gcsd", daemon=True)
+
+    def _main(self) -> None:
+        async def body():
+            self._loop = asyncio.get_running_loop()
+            self._stop = asyncio.Event()
+            self.gcs = GCS(self.config)
+            runner = asyncio.create_task(self.gcs.run(self._stop))
+            await self.gcs.all_open.wait()
+            self._ready.set()
+            await runner
+
+        try:
+            asyncio.run(body())
+        except BaseException as exc:  # surfaced to the test by start()/stop()
+            self._error = exc
+            self._ready.set()
+
+    def start(self) -> "RunningDaemon":
+        self._thread.start()
+        if not self._ready.wait(START_TIMEOUT_S) or self._error:
+            raise RuntimeError(f"daemon did not start: {self._error!r}")
+        return self
+
+    def stop(self) -> None:
+        if self._loop is not None and self._stop is not None and self._thread.is_alive():
+            self._loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(5.0)
+        assert not self._thread.is_alive(), "daemon thread did not stop within 5 s"
+        if self._error:
+            raise self._error
+
+    def port(self, name: str) -> int:
+        for ch in self.gcs.channels:
+            if ch.name == name:
+                return ch.local_address[1]
+        raise KeyError(name)
+
+    def stats(self, name: str) -> dict[str, int]:
+        for ch in self.gcs.channels:
+            if ch.name == name:
+                return ch.snapshot()
+        raise KeyError(name)
+
+
+@pytest.fixture
+def daemon(tmp_path: Path):
+    started: list[RunningDaemon] = []
+
+    def start(conf: str | dict) -> RunningDaemon:
+        data = yaml.safe_load(conf) if isinstance(conf, str) else dict(conf)
+        data.setdefault("state_dir", str(tmp_path / "state"))
+        config = parse_config(yaml.safe_dump(data), "test.yaml")
+        d = RunningDaemon(config).start()
+        started.append(d)
+        return d
+
+    yield start
+    for d in started:
+        d.stop()
