@@ -1,0 +1,164 @@
+"""The ten-bucket deferred send scheduler, driven with a float clock (REFERENCE.md section 4)."""
+
+from __future__ import annotations
+
+from gcsd.scheduler import MIN_INTERVAL_MS, NUM_BUCKETS, SendScheduler
+
+HB = 0
+
+
+class Recorder:
+    def __init__(self, room: int | None = None) -> None:
+        self.sent: list[tuple[float, int]] = []
+        self.room = room
+        self.now = 0.0
+
+    def __call__(self, msgid: int) -> bool:
+        if self.room is not None:
+            if self.room <= 0:
+                return False
+            self.room -= 1
+        self.sent.append((self.now, msgid))
+        return True
+
+    def ids(self):
+        return [m for _, m in self.sent]
+
+
+def run_for(s: SendScheduler, rec: Recorder, start: float, end: float) -> None:
+    """Advance time deadline by deadline, as the channel task does."""
+    now = start
+    while now <= end + 1e-6:
+        rec.now = now
+        s.run(now, rec)
+        nxt = s.next_deadline(now)
+        if nxt is None:
+            break
+        now = max(nxt, now + 1e-6)
+
+
+def count(rec: Recorder, msgid: int) -> int:
+    return sum(1 for _, m in rec.sent if m == msgid)
+
+
+def test_bucket_sends_at_its_rate_and_keeps_phase():
+    s = SendScheduler(0.0)
+    s.set_interval(30, 100, 0.0)
+    rec = Recorder()
+    run_for(s, rec, 0.0, 10.0)
+    assert count(rec, 30) == 100
+    times = [t for t, m in rec.sent if m == 30]
+    assert abs(times[1] - times[0] - 0.1) < 1e-9
+
+
+def test_messages_with_the_same_interval_share_a_bucket():
+    s = SendScheduler(0.0)
+    for msgid in (30, 33, 74):
+        s.set_interval(msgid, 200, 0.0)
+    rec = Recorder()
+    run_for(s, rec, 0.0, 1.0)
+    assert rec.ids() == [30, 33, 74] * 5
+
+
+def test_heartbeat_special_slot_runs_at_its_own_interval():
+    s = SendScheduler(0.0, special_ids=(HB,))
+    s.set_interval(HB, 1000, 0.0)
+    s.set_interval(30, 50, 0.0)
+    rec = Recorder()
+    run_for(s, rec, 0.0, 4.99)
+    assert count(rec, HB) == 5  # 0, 1, 2, 3, 4 s
+    assert count(rec, 30) == 99
+
+
+def test_pushed_message_is_sent_once_before_buckets():
+    s = SendScheduler(0.0)
+    s.set_interval(30, 100, 0.0)
+    s.push(148)
+    rec = Recorder()
+    run_for(s, rec, 0.1, 1.0)
+    assert rec.ids()[0] == 148
+    assert count(rec, 148) == 1
+
+
+def test_interval_zero_removes_the_message():
+    s = SendScheduler(0.0)
+    s.set_interval(30, 100, 0.0)
+    s.set_interval(30, 0, 0.0)
+    assert s.interval_ms(30) is None
+    assert s.next_deadline(0.0) is None
+
+
+def test_changing_interval_moves_the_message_to_a_new_bucket():
+    s = SendScheduler(0.0)
+    s.set_interval(30, 100, 0.0)
+    s.set_interval(33, 100, 0.0)
+    s.set_interval(30, 20, 0.0)
+    assert (s.interval_ms(30), s.interval_ms(33)) == (20, 100)
+    rec = Recorder()
+    run_for(s, rec, 0.0, 1.0)
+    assert count(rec, 30) == 50
+    assert count(rec, 33) == 10
+
+
+def test_eleventh_distinct_interval_joins_the_nearest_bucket():
+    s = SendScheduler(0.0)
+    for i in range(NUM_BUCKETS):
+        s.set_interval(100 + i, 100 * (i + 1), 0.0)  # 100, 200, ... 1000 ms
+    s.set_interval(200, 330, 0.0)
+    assert s.interval_ms(200) == 300
+
+
+def test_intervals_are_capped_at_the_loop_rate_and_60_s():
+    s = SendScheduler(0.0)
+    s.set_interval(30, 1, 0.0)
+    s.set_interval(33, 90_000, 0.0)
+    assert s.interval_ms(30) == MIN_INTERVAL_MS
+    assert s.interval_ms(33) == 60_000
+
+
+def test_full_link_stops_the_pass_and_retries_the_same_message():
+    s = SendScheduler(0.0)
+    for msgid in (30, 33, 74):
+        s.set_interval(msgid, 100, 0.0)
+    rec = Recorder(room=2)
+    assert s.run(0.1, rec) is False
+    assert rec.ids() == [30, 33]
+    rec.room = 10
+    s.run(0.1001, rec)
+    assert rec.ids() == [30, 33, 74]
+
+
+def test_slowdown_lengthens_the_reschedule_interval():
+    s = SendScheduler(0.0)
+    s.set_interval(30, 100, 0.0)
+    s.slowdown_ms = 100
+    rec = Recorder()
+    run_for(s, rec, 0.0, 10.0)
+    assert 48 <= count(rec, 30) <= 51
+
+
+def test_slow_factor_multiplies_the_interval():
+    s = SendScheduler(0.0)
+    s.set_interval(30, 100, 0.0)
+    s.slow_factor = 4
+    rec = Recorder()
+    run_for(s, rec, 0.0, 10.0)
+    assert count(rec, 30) == 25
+
+
+def test_clock_snaps_forward_after_a_stall_instead_of_bursting():
+    s = SendScheduler(0.0)
+    s.set_interval(30, 100, 0.0)
+    rec = Recorder()
+    run_for(s, rec, 0.0, 1.0)
+    before = count(rec, 30)
+    rec.now = 5.0
+    s.run(5.0, rec)
+    s.run(5.0, rec)
+    assert count(rec, 30) - before == 1, "one send after the stall, not 40"
+
+
+def test_deadline_is_now_while_pushed_messages_wait():
+    s = SendScheduler(0.0)
+    s.push(148)
+    assert s.next_deadline(3.0) == 3.0
