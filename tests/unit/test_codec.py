@@ -100,7 +100,7 @@ def test_reset_drops_a_truncated_frame():
 
 
 def test_mavlink1_encoder_refuses_ids_above_255():
-    msg = M.MAVLink_protocol_version_message(200, 100, 200, b"\0" * 8, b"\0" * 8)  # id 300
+    msg = M.MAVLink_button_change_message(0, 0, 1)  # id 257
     assert Encoder(1, 1).encode(msg, mavlink1=True) is None
     assert Encoder(1, 1).encode(msg)[0] == 0xFD
 
