@@ -5,8 +5,8 @@ MAVProxy runs as its users run it against a vehicle on UDP:
 `mavproxy.py --master=udpout:127.0.0.1:PORT --no-state --default-modules=mode,arm`, commands fed
 line by line on stdin. (`--non-interactive` is not used: with it MAVProxy never reads stdin.)
 Its console output is the observable: "Detected vehicle 1:1 on link 0", "Mode STABILIZE",
-"GPS lock at 584 meters", "Got COMMAND_ACK: ...: ACCEPTED", "ARMED", and `status
-GLOBAL_POSITION_INT`, which prints the last decoded message with its fields.
+"GPS lock at 584 meters", "Got COMMAND_ACK: ...: ACCEPTED", "ARMED", and `status NAME`
+(GLOBAL_POSITION_INT, HEARTBEAT, GPS_RAW_INT), which prints the last such message decoded.
 """
 
 from __future__ import annotations
@@ -37,6 +37,10 @@ MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 MAV_MODE_FLAG_SAFETY_ARMED = 128
 COPTER_STABILIZE = 0
 COPTER_GUIDED = 4
+GPS_RAW_INT_LINE = re.compile(
+    r"GPS_RAW_INT \{time_usec : \d+, fix_type : (?P<fix_type>\d+), lat : (?P<lat>-?\d+), lon : (?P<lon>-?\d+)"
+)
+GPS_FIX_TYPE_3D_FIX = 3
 GLOBAL_POSITION_INT_LINE = re.compile(
     r"GLOBAL_POSITION_INT \{time_boot_ms : \d+, lat : (?P<lat>-?\d+), lon : (?P<lon>-?\d+), "
     r"alt : (?P<alt>-?\d+), relative_alt : (?P<relative_alt>-?\d+)"
@@ -134,9 +138,6 @@ def test_mavproxy_detects_copter_within_2s_and_sees_mode_gps_and_home_position(
     )
     _expect(process, daemon, r"online system 1$", 1.0, detected_index, "that system 1 is its target")
 
-    # GPS_RAW_INT with a 3D fix plus VFR_HUD.alt: MAVProxy's "GPS lock" announcement.
-    _expect(process, daemon, r"GPS lock at 584 meters", 5.0, link_index, "a 3D GPS lock at 584 m")
-
     position = _last_message(process, daemon, "GLOBAL_POSITION_INT", GLOBAL_POSITION_INT_LINE)
     assert abs(int(position["lat"]) - round(home_position.lat_deg * 1e7)) <= POSITION_TOLERANCE_1E7, position[0]
     assert abs(int(position["lon"]) - round(home_position.lon_deg * 1e7)) <= POSITION_TOLERANCE_1E7, position[0]
@@ -151,13 +152,26 @@ def test_mavproxy_detects_copter_within_2s_and_sees_mode_gps_and_home_position(
     # MAVProxy announces ARMED only on a change, so it must not have.
     assert process.output.wait_for(r"(?:^|> )ARMED$", 0.0) is None, process.describe()
 
+    gps = _last_message(process, daemon, "GPS_RAW_INT", GPS_RAW_INT_LINE)
+    assert int(gps["fix_type"]) >= GPS_FIX_TYPE_3D_FIX, gps[0]
+    assert abs(int(gps["lat"]) - round(home_position.lat_deg * 1e7)) <= POSITION_TOLERANCE_1E7, gps[0]
+    assert abs(int(gps["lon"]) - round(home_position.lon_deg * 1e7)) <= POSITION_TOLERANCE_1E7, gps[0]
+
+    # MAVProxy announces "GPS lock at N meters" on the first VFR_HUD with a non-zero alt once
+    # GPS_RAW_INT has a 3D fix; VFR_HUD.alt is the altitude above mean sea level (MAVLink
+    # common.xml; ArduCopter sends the AMSL altitude by default), so N is home's 584 m.
+    _expect(
+        process, daemon, r"GPS lock at 584 meters", 5.0, link_index,
+        "a 3D GPS lock at 584 m (VFR_HUD.alt must be the AMSL altitude)",
+    )
+
 
 @pytest.mark.interop
 def test_mavproxy_sets_guided_then_arms_and_disarms(gcsd_daemon, mavproxy):
     daemon = gcsd_daemon()
     process = mavproxy(daemon.port("gcs"))
     _expect(process, daemon, r"Mode STABILIZE$", 10.0, 0, "the mode STABILIZE")
-    _expect(process, daemon, r"GPS lock at 584 meters", 5.0, 0, "a 3D GPS lock at 584 m")
+    _last_message(process, daemon, "GLOBAL_POSITION_INT", GLOBAL_POSITION_INT_LINE)  # has a position
 
     since = len(process.output)
     process.send_line("mode GUIDED")
