@@ -159,10 +159,15 @@ def test_mavproxy_detects_copter_within_2s_and_sees_mode_gps_and_home_position(
 
     # MAVProxy announces "GPS lock at N meters" on the first VFR_HUD with a non-zero alt once
     # GPS_RAW_INT has a 3D fix; VFR_HUD.alt is the altitude above mean sea level (MAVLink
-    # common.xml; ArduCopter sends the AMSL altitude by default), so N is home's 584 m.
+    # common.xml; ArduCopter sends the AMSL altitude by default), so N is home's altitude.
+    home_alt_m = int(home_position.alt_m)
     _expect(
-        process, daemon, r"GPS lock at 584 meters", 5.0, link_index,
-        "a 3D GPS lock at 584 m (VFR_HUD.alt must be the AMSL altitude)",
+        process,
+        daemon,
+        rf"GPS lock at {home_alt_m} meters",
+        5.0,
+        link_index,
+        f"a 3D GPS lock at {home_alt_m} m (VFR_HUD.alt must be the AMSL altitude)",
     )
 
 
