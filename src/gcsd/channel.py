@@ -101,6 +101,7 @@ class Channel:
         self.local_address: tuple[str, int] | None = None
         self.on_frame: Callable[[Channel, Frame], None] = lambda channel, frame: None
         self.on_bad_crc: Callable[[Channel, bytes], None] = lambda channel, raw: None
+        self.on_peer_joined: Callable[[Channel], None] = lambda channel: None
         self._encoders: dict[tuple[int, int], Encoder] = {}
         self._keep_bad_crc = "forward_bad_crc" in config.options
         self._retired = ParseStats()  # counters of peers that are gone
@@ -109,6 +110,7 @@ class Channel:
     def add_peer(self, key: object, write: PeerWriter) -> Peer:
         peer = Peer(key, write, self.clock(), self._keep_bad_crc)
         self.peers[key] = peer
+        self.on_peer_joined(self)
         return peer
 
     def remove_peer(self, key: object) -> None:

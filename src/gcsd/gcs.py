@@ -61,6 +61,7 @@ class GCS:
         for ch in self.channels:
             ch.on_frame = self.on_frame
             ch.on_bad_crc = self.on_bad_crc
+            ch.on_peer_joined = self.on_peer_joined
         self._last_sweep_s = 0.0
 
     def wake(self, channel: Channel) -> None:
@@ -94,6 +95,11 @@ class GCS:
         if target_component > 0:
             return [n for n in self.nodes if n.compid == target_component] or self.nodes
         return self.nodes
+
+    def on_peer_joined(self, channel: Channel) -> None:
+        """A new ground station hears from us at once instead of at the next 1 Hz slot."""
+        for node in self.nodes:
+            node.link(channel).push(MSG_ID_HEARTBEAT)
 
     def on_bad_crc(self, channel: Channel, raw: bytes) -> None:
         for index in self.router._broadcast_channels(channel.index):

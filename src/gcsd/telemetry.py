@@ -104,7 +104,7 @@ def simstate(node, channel, now):
 def vfr_hud(node, channel, now):
     s = node.state
     return M.MAVLink_vfr_hud_message(
-        s.groundspeed_ms, s.groundspeed_ms, int(s.heading_deg), s.throttle_pct, s.relative_alt_m, -s.vd_ms
+        s.groundspeed_ms, s.groundspeed_ms, int(s.heading_deg), s.throttle_pct, s.alt_amsl_m, -s.vd_ms  # alt is AMSL
     )
 
 
