@@ -1,11 +1,13 @@
 """MAVLink framing and encoding, on top of pymavlink.
 
-Receive: `FrameParser.feed(data)` turns a byte stream into `Frame`s. pymavlink's parser does the
-framing, CRC (with fastcrc) and decoding; this module adds what a router needs:
+Receive: `FrameParser.feed(data)` turns a byte stream into `Frame`s. Like mavlink-router, the
+routing header is parsed once per frame and nothing more: framing, the CRC (fastcrc, with the
+dialect's CRC_EXTRA from pymavlink) and the target fields read at their payload offsets.
+pymavlink decodes a frame only when something local reads `Frame.msg`. What a router needs:
 
 - the raw bytes of every good frame (forwarding is byte-exact, signature included),
-- frames with a message id the dialect does not know, kept raw (`msg is None`) so the router can
-  forward them as broadcasts, as the MAVLink routing guide asks,
+- frames with a message id the dialect does not know, kept raw (`known = False`) so the router
+  can forward them as broadcasts, as the MAVLink routing guide asks,
 - counters: parse errors (bytes that are not a frame), CRC errors, sequence gaps per source,
 - a resync strategy for noisy serial: a frame that fails its CRC is not swallowed whole; the
   parser restarts on the byte after its false start, so a real frame hidden behind a stray
@@ -18,35 +20,93 @@ such messages are not sent on a MAVLink1 link, as in ArduPilot.
 
 from __future__ import annotations
 
+import re
+import struct
 from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
+from pymavlink.generator.mavcrc import x25crc
+
+try:  # fastcrc is a dependency; the fallback keeps a broken install correct, only slower
+    from fastcrc.crc16 import mcrf4xx as _mcrf4xx
+
+    def _crc16(data: bytes) -> int:
+        return _mcrf4xx(data)
+except ImportError:  # pragma: no cover
+    def _crc16(data: bytes) -> int:
+        return x25crc(data).crc
 
 MAVLink_message = mavlink.MAVLink_message
 STX_V1 = 0xFE
 STX_V2 = 0xFD
 MSG_ID_RADIO_STATUS = mavlink.MAVLINK_MSG_ID_RADIO_STATUS
 MSG_ID_RADIO = mavlink.MAVLINK_MSG_ID_RADIO
-_CRC_ERROR = "invalid MAVLink CRC"
 
 
-@dataclass(slots=True)
+class _MessageInfo:
+    """What routing needs of a message id: its CRC_EXTRA and where its target fields are."""
+
+    __slots__ = ("crc_extra", "target_system_ofs", "target_component_ofs")
+
+    def __init__(self, cls) -> None:
+        self.crc_extra = cls.crc_extra
+        tokens = re.findall(r"(\d*)([a-zA-Z?])", cls.unpacker.format)
+        offsets, offset = {}, 0
+        for name, (count, code) in zip(cls.ordered_fieldnames, tokens):
+            offsets[name] = offset
+            offset += struct.calcsize("<" + count + code)
+        self.target_system_ofs = offsets.get("target_system", -1)
+        self.target_component_ofs = offsets.get("target_component", -1)
+
+
+MESSAGE_INFO: dict[int, _MessageInfo] = {msgid: _MessageInfo(cls) for msgid, cls in mavlink.mavlink_map.items()}
+_decoder = mavlink.MAVLink(None)
+_decoder.robust_parsing = False
+
+
 class Frame:
-    """One good frame as received: the decoded message (None for unknown ids) and its bytes."""
+    """One good frame as received: its bytes, header and routing targets; decoded on demand.
 
-    raw: bytes
-    msg: MAVLink_message | None
-    msgid: int
-    sysid: int
-    compid: int
-    seq: int
-    version: int
-    target_system: int = -1  # -1: the message has no target field
-    target_component: int = -1
+    Routing needs only the header and the target fields, read straight from the payload (a
+    MAVLink2 payload may be truncated: a missing byte is zero). The pymavlink message object
+    is built the first time `msg` is read, i.e. only for frames something local will handle.
+    """
+
+    __slots__ = ("raw", "msgid", "sysid", "compid", "seq", "version", "known",
+                 "target_system", "target_component", "_msg")
+
+    def __init__(self, raw: bytes, msgid: int, sysid: int, compid: int, seq: int, version: int,
+                 known: bool, target_system: int = -1, target_component: int = -1) -> None:
+        self.raw = raw
+        self.msgid = msgid
+        self.sysid = sysid
+        self.compid = compid
+        self.seq = seq
+        self.version = version
+        self.known = known
+        self.target_system = target_system
+        self.target_component = target_component
+        self._msg = None
+
+    @property
+    def msg(self) -> MAVLink_message | None:
+        if self._msg is None and self.known:
+            self._msg = _decoder.decode(bytearray(self.raw))
+        return self._msg
+
+    @property
+    def signed(self) -> bool:
+        return self.version == 2 and bool(self.raw[2] & mavlink.MAVLINK_IFLAG_SIGNED)
 
     @property
     def name(self) -> str:
-        return self.msg.get_type() if self.msg is not None else f"UNKNOWN_{self.msgid}"
+        return mavlink.mavlink_map[self.msgid].msgname if self.known else f"UNKNOWN_{self.msgid}"
+
+    @classmethod
+    def from_message(cls, msg: MAVLink_message) -> "Frame":
+        """A Frame for a message we built or decoded ourselves (tests, loopback)."""
+        frames = FrameParser().feed(bytes(msg.get_msgbuf()))
+        return frames[0]
 
 
 @dataclass
@@ -62,95 +122,122 @@ class ParseStats:
     last_seq: dict[tuple[int, int], int] = field(default_factory=dict)
 
 
-def _header_fields(raw: bytes | bytearray) -> tuple[int, int, int, int, int]:
-    """(version, seq, sysid, compid, msgid) straight from a frame's header bytes."""
-    if raw[0] == STX_V2:
-        return 2, raw[4], raw[5], raw[6], raw[7] | (raw[8] << 8) | (raw[9] << 16)
-    return 1, raw[2], raw[3], raw[4], raw[5]
+MAX_SOURCES_TRACKED = 256
 
 
 class FrameParser:
-    """Stream of bytes in, frames out. One per peer (a UDP client, a TCP connection, a serial port)."""
+    """Stream of bytes in, frames out. One per peer (a UDP client, a TCP connection, a serial port).
+
+    Framing: find STX (0xFD MAVLink2, 0xFE MAVLink1), read the length, wait for the whole frame,
+    check the CRC with the message's CRC_EXTRA. Bytes that are not a frame start are skipped in
+    one step and counted once per run as a parse error. A MAVLink2 frame with unknown
+    incompatibility flags is a parse error. A frame that fails its CRC is counted and the
+    search restarts on the byte after its STX, so a real frame hidden behind a stray STX (noise
+    on a serial line) is still found. A frame whose id the dialect does not know cannot have
+    its CRC checked; it is passed on with `known = False` for the router to forward as a
+    broadcast.
+    """
 
     def __init__(self, stats: ParseStats | None = None, keep_bad_crc: bool = False) -> None:
         self.stats = stats if stats is not None else ParseStats()
-        self._mav = mavlink.MAVLink(None)
-        self._mav.robust_parsing = True
+        self._buf = b""
         self._keep_bad_crc = keep_bad_crc
         self.bad_crc_frames: list[bytes] = []  # frames that failed their CRC (forward_bad_crc); caller drains
 
-    @property
-    def signing(self):
-        """pymavlink's signing state of this parser (secret_key, callbacks, counters)."""
-        return self._mav.signing
+    def pending_bytes(self) -> int:
+        """Bytes held waiting for the rest of a frame (a truncated frame, if the stream ended)."""
+        return len(self._buf)
+
+    def reset(self) -> int:
+        """Drop a partial frame (end of a UDP datagram); returns how many bytes were dropped."""
+        dropped = len(self._buf)
+        if dropped:
+            self.stats.parse_errors += 1
+        self._buf = b""
+        return dropped
 
     def feed(self, data: bytes) -> list[Frame]:
         stats = self.stats
         stats.bytes += len(data)
+        buf = self._buf + data if self._buf else bytes(data)
+        n = len(buf)
+        i = 0
         frames: list[Frame] = []
-        mav = self._mav
-        m = mav.parse_char(data)
-        while m is not None:
-            self._take(m, frames)
-            m = mav.parse_char(b"")
+        info_of = MESSAGE_INFO.get
+        while i < n:
+            stx = buf[i]
+            if stx != STX_V2 and stx != STX_V1:
+                j = _next_stx(buf, i + 1)
+                stats.parse_errors += 1
+                i = j
+                continue
+            if stx == STX_V2:
+                if n - i < 10:
+                    break
+                plen = buf[i + 1]
+                flags = buf[i + 2]
+                if flags & ~mavlink.MAVLINK_IFLAG_SIGNED:
+                    stats.parse_errors += 1
+                    i += 1
+                    continue
+                hlen = 10
+                total = plen + 12 + (13 if flags else 0)
+                if n - i < total:
+                    break
+                seq, sysid, compid = buf[i + 4], buf[i + 5], buf[i + 6]
+                msgid = buf[i + 7] | (buf[i + 8] << 8) | (buf[i + 9] << 16)
+                version = 2
+            else:
+                if n - i < 6:
+                    break
+                plen = buf[i + 1]
+                hlen = 6
+                total = plen + 8
+                if n - i < total:
+                    break
+                seq, sysid, compid, msgid = buf[i + 2], buf[i + 3], buf[i + 4], buf[i + 5]
+                version = 1
+            raw = buf[i:i + total]
+            info = info_of(msgid)
+            if info is None:
+                stats.unknown_ids += 1
+                frame = Frame(raw, msgid, sysid, compid, seq, version, False)
+            else:
+                crc_end = hlen + plen
+                crc = _crc16(raw[1:crc_end] + bytes((info.crc_extra,)))
+                if crc != raw[crc_end] | (raw[crc_end + 1] << 8):
+                    stats.crc_errors += 1
+                    if self._keep_bad_crc:
+                        self.bad_crc_frames.append(raw)
+                    i += 1  # resync: the real frame may start inside this one
+                    continue
+                ts_ofs, tc_ofs = info.target_system_ofs, info.target_component_ofs
+                ts = tc = -1
+                if ts_ofs >= 0:
+                    ts = raw[hlen + ts_ofs] if ts_ofs < plen else 0
+                if tc_ofs >= 0:
+                    tc = raw[hlen + tc_ofs] if tc_ofs < plen else 0
+                frame = Frame(raw, msgid, sysid, compid, seq, version, True, ts, tc)
+            stats.frames += 1
+            key = (sysid, compid)
+            last = stats.last_seq.get(key)
+            if last is not None:
+                stats.seq_gaps += (seq - last - 1) & 0xFF
+                stats.last_seq[key] = seq
+            elif len(stats.last_seq) < MAX_SOURCES_TRACKED:
+                stats.last_seq[key] = seq
+            frames.append(frame)
+            i += total
+        self._buf = buf[i:] if i < n else b""
         return frames
 
-    def pending_bytes(self) -> int:
-        """Bytes held waiting for the rest of a frame (a truncated frame, if the stream ended)."""
-        return len(self._mav.buf) - self._mav.buf_index
 
-    def reset(self) -> int:
-        """Drop a partial frame (end of a UDP datagram); returns how many bytes were dropped."""
-        dropped = self.pending_bytes()
-        if dropped:
-            self.stats.parse_errors += 1
-        self._mav.buf = bytearray()
-        self._mav.buf_index = 0
-        self._mav.expected_length = mavlink.HEADER_LEN_V1 + 2
-        return dropped
-
-    def _take(self, m: MAVLink_message, frames: list[Frame]) -> None:
-        stats = self.stats
-        kind = m.get_type()
-        if kind == "BAD_DATA":
-            reason = m.reason
-            if reason.startswith(_CRC_ERROR):
-                stats.crc_errors += 1
-                if self._keep_bad_crc:
-                    self.bad_crc_frames.append(bytes(m.data))
-                self._rescan_after_false_start(m.data)
-            else:
-                stats.parse_errors += 1
-            return
-        raw = bytes(m.get_msgbuf())
-        version, seq, sysid, compid, msgid = _header_fields(raw)
-        if kind.startswith("UNKNOWN_"):
-            stats.unknown_ids += 1
-            frame = Frame(raw, None, msgid, sysid, compid, seq, version)
-        else:
-            frame = Frame(
-                raw, m, msgid, sysid, compid, seq, version,
-                getattr(m, "target_system", -1), getattr(m, "target_component", -1),
-            )
-        stats.frames += 1
-        key = (sysid, compid)
-        last = stats.last_seq.get(key)
-        if last is not None:
-            stats.seq_gaps += (seq - last - 1) & 0xFF
-        if len(stats.last_seq) < 256 or last is not None:
-            stats.last_seq[key] = seq
-        frames.append(frame)
-
-    def _rescan_after_false_start(self, bad: bytearray) -> None:
-        """Put back everything after the false STX so a frame hidden inside is found."""
-        mav = self._mav
-        rest = bytes(bad[1:])
-        start = next((i for i, b in enumerate(rest) if b in (STX_V1, STX_V2)), len(rest))
-        if start < len(rest):
-            mav.buf = bytearray(rest[start:]) + mav.buf[mav.buf_index:]
-            mav.buf_index = 0
-        if start:
-            self.stats.parse_errors += 1
+def _next_stx(buf: bytes, start: int) -> int:
+    a = buf.find(b"\xfd", start)
+    b = buf.find(b"\xfe", start)
+    if a < 0:
+        return len(buf) if b < 0 else b
+    return a if b < 0 or a < b else b
 
 
 class Encoder:

@@ -76,15 +76,15 @@ class GCS:
             self.active.add(channel.index)
         decision = self.router.decide(
             channel.index, msgid, frame.sysid, frame.compid, frame.target_system, frame.target_component,
-            now, self.active, frame.msg is not None,
-            frame.msg.type if msgid == MSG_ID_HEARTBEAT and frame.msg is not None else None,
+            now, self.active, frame.known,
+            frame.msg.type if msgid == MSG_ID_HEARTBEAT and frame.known else None,
         )
         if decision.out_channels:
             raw = frame.raw
             channels = self.channels
             for index in decision.out_channels:
                 channels[index].write(raw)
-        if decision.process_locally and frame.msg is not None:
+        if decision.process_locally and frame.known:
             for node in self._nodes_for(frame.target_system, frame.target_component):
                 node.handle(channel, frame, now)
 
