@@ -41,6 +41,8 @@ MAX_STREAM_RATE_HZ = 50
 MAX_SPEEDUP = 1000
 COMPANION_COMPID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
 SIGNING_KEY_HEX_CHARS = 64
+MAX_MISSION_ITEMS = 65535  # MISSION_COUNT.count is a uint16
+MIN_MISSION_RETRY_MS, MAX_MISSION_RETRY_MS = 50, 5000
 
 
 @dataclass(frozen=True)
@@ -68,6 +70,14 @@ class VehicleConfig:
 class GcsConfig:
     sysid: int = 255
     enforce_sysid: bool = False
+
+
+@dataclass(frozen=True)
+class MissionConfig:
+    max_items: int = 700  # mission items, home (item 0) included
+    max_fence: int = 100
+    max_rally: int = 50
+    retry_ms: int = 1000  # re-request a missing item after this long (ArduPilot: 1000 ms)
 
 
 @dataclass(frozen=True)
@@ -115,6 +125,7 @@ class Config:
     state_dir: Path = Path("./gcsd-state")
     params_file: Path | None = None
     gcs: GcsConfig = GcsConfig()
+    mission: MissionConfig = MissionConfig()
     ftp: FtpConfig = FtpConfig()
     signing: SigningConfig = SigningConfig()
     channels: tuple[ChannelConfig, ...] = (
@@ -164,8 +175,9 @@ def parse_config(text: str, filename: str = "<config>") -> Config:
 
 # --- the schema, one function per section -------------------------------------------------------
 
-_TOP_KEYS = ("vehicle", "state_dir", "params_file", "gcs", "ftp", "signing", "channels", "log")
+_TOP_KEYS = ("vehicle", "state_dir", "params_file", "gcs", "mission", "ftp", "signing", "channels", "log")
 _VEHICLE_KEYS = ("type", "sysid", "compid", "count", "home", "speedup")
+_MISSION_KEYS = ("max_items", "max_fence", "max_rally", "retry_ms")
 _CHANNEL_KEYS = ("name", "type", "address", "device", "baud", "mavlink", "streams", "options",
                  "private", "bandwidth")
 _NETWORK_TYPES = tuple(t for t in CHANNEL_TYPES if t != "serial")
@@ -184,6 +196,7 @@ def _config(r: _Reader, top: _Section) -> Config:
         params_file=None if params_file is None else Path(params_file),
         gcs=GcsConfig(sysid=r.integer(gcs["sysid"], 255, 1, 255),
                       enforce_sysid=r.boolean(gcs["enforce_sysid"], False)),
+        mission=_mission(r, r.section(top["mission"], _MISSION_KEYS)),
         ftp=FtpConfig(root=_ftp_root(r, ftp["root"])),
         signing=_signing(r, r.section(top["signing"], ("key", "require"))),
         channels=_channels(r, top["channels"]),
@@ -208,6 +221,16 @@ def _vehicle(r: _Reader, v: _Section) -> VehicleConfig:
                   lon=r.number(home["lon"], Home.lon, -180, 180),
                   alt=r.number(home["alt"], Home.alt, -1000, 100_000)),
         speedup=r.number(v["speedup"], 1.0, 0, MAX_SPEEDUP, low_open=True),
+    )
+
+
+def _mission(r: _Reader, m: _Section) -> MissionConfig:
+    d = MissionConfig()
+    return MissionConfig(
+        max_items=r.integer(m["max_items"], d.max_items, 1, MAX_MISSION_ITEMS),
+        max_fence=r.integer(m["max_fence"], d.max_fence, 1, MAX_MISSION_ITEMS),
+        max_rally=r.integer(m["max_rally"], d.max_rally, 1, MAX_MISSION_ITEMS),
+        retry_ms=r.integer(m["retry_ms"], d.retry_ms, MIN_MISSION_RETRY_MS, MAX_MISSION_RETRY_MS),
     )
 
 

@@ -12,6 +12,7 @@ from gcsd.config import (
     Config,
     ConfigError,
     Home,
+    MissionConfig,
     default_config,
     load_config,
     parse_config,
@@ -145,6 +146,15 @@ def test_a_full_configuration_is_read_into_the_dataclasses():
     assert (config.log.level, config.log.format, config.log.tlog) == ("debug", "json", "flight.tlog")
 
 
+def test_mission_limits_default_to_700_mission_100_fence_50_rally_items_and_1_s_retry():
+    assert default_config().mission == MissionConfig(max_items=700, max_fence=100, max_rally=50, retry_ms=1000)
+
+
+def test_mission_limits_are_read():
+    config = parse("mission: {max_items: 1000, max_fence: 20, max_rally: 5, retry_ms: 250}\n")
+    assert config.mission == MissionConfig(max_items=1000, max_fence=20, max_rally=5, retry_ms=250)
+
+
 def test_relative_paths_are_kept_as_written():
     config = parse("state_dir: ./run/state\nparams_file: ../params/copter.parm\n")
     assert config.state_dir == Path("run/state")
@@ -178,7 +188,7 @@ BAD_CONFIGS = [
     ("vehicle:\n  sysdi: 2\n", "gcsd.yaml:2: vehicle.sysdi: unknown key; did you mean 'sysid'?"),
     ("chanels: []\n", "gcsd.yaml:1: chanels: unknown key; did you mean 'channels'?"),
     ("colour: red\n", "gcsd.yaml:1: colour: unknown key (known keys: vehicle, state_dir, params_file, gcs, "
-                      "ftp, signing, channels, log)"),
+                      "mission, ftp, signing, channels, log)"),
     ("vehicle: {sysid: 1, sysid: 2}\n", "gcsd.yaml:1: vehicle.sysid: duplicate key"),
     ("vehicle: copter\n", "gcsd.yaml:1: vehicle: expected a mapping, got 'copter'"),
     ("vehicle: {type: coptr}\n", "gcsd.yaml:1: vehicle.type: expected copter|plane|rover|sub|tracker|blimp|"
@@ -210,6 +220,13 @@ BAD_CONFIGS = [
     ("params_file: {}\n", "gcsd.yaml:1: params_file: expected a non-empty string or null, got a mapping"),
     ("gcs: {sysid: 0}\n", "gcsd.yaml:1: gcs.sysid: expected an integer 1..255, got 0"),
     ("gcs: {enforce_sysid: 1}\n", "gcsd.yaml:1: gcs.enforce_sysid: expected true or false, got 1"),
+    ("mission: {max_items: 0}\n", "gcsd.yaml:1: mission.max_items: expected an integer 1..65535, got 0"),
+    ("mission: {max_fence: 65536}\n",
+     "gcsd.yaml:1: mission.max_fence: expected an integer 1..65535, got 65536"),
+    ("mission: {max_rally: many}\n", "gcsd.yaml:1: mission.max_rally: expected an integer 1..65535, got 'many'"),
+    ("mission: {retry_ms: 10}\n", "gcsd.yaml:1: mission.retry_ms: expected an integer 50..5000, got 10"),
+    ("mission: {max_item: 5}\n", "gcsd.yaml:1: mission.max_item: unknown key; did you mean 'max_items'?"),
+    ("mission: 700\n", "gcsd.yaml:1: mission: expected a mapping, got 700"),
     ("ftp: {root: /srv/ftp}\n", "gcsd.yaml:1: ftp.root: expected a path relative to state_dir without '..', "
                                 "got '/srv/ftp'"),
     ("ftp: {root: a/../../b}\n", "gcsd.yaml:1: ftp.root: expected a path relative to state_dir without '..', "
