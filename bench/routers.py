@@ -1,0 +1,195 @@
+"""Launching the routers under test (gcsd, MAVProxy), free ports, and /proc sampling.
+
+gcsd runs as ``[sys.executable, "-m", "gcsd", "run", "-c", CFG]`` (optionally under cProfile);
+MAVProxy as a pure forwarder: ``mavproxy.py --master=udpin:A --out=udpout:B --non-interactive
+--no-state --default-modules= --streamrate=-1`` (it forwards master -> every --out and --out ->
+master; only the ``link`` module is loaded; it sends its own 1 Hz HEARTBEAT as sysid 255).
+Output of each process goes to a log file in the run's temporary directory; ``stop()`` sends SIGTERM,
+waits, and reports the exit code (or that it had to be killed).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+CLK_TCK = os.sysconf("SC_CLK_TCK")
+
+STREAMS_OFF = ("{raw_sens: 0, ext_stat: 0, rc_chan: 0, raw_ctrl: 0, position: 0, "
+               "extra1: 0, extra2: 0, extra3: 0, params: 0, adsb: 0}")
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def cpu_seconds(pid: int) -> float:
+    """utime + stime of a process from /proc/PID/stat, in seconds."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLK_TCK
+
+
+def machine_busy_s() -> float:
+    """CPU seconds spent in user, nice and system mode by all processes on all CPUs (/proc/stat)."""
+    with open("/proc/stat") as f:
+        cols = f.readline().split()
+    return (int(cols[1]) + int(cols[2]) + int(cols[3])) / CLK_TCK
+
+
+def udp_drops(ports) -> dict[int, int]:
+    """Kernel drop counters (receive buffer full) of the UDP sockets bound to these local ports."""
+    want = set(ports)
+    drops = {p: 0 for p in want}
+    try:
+        with open("/proc/net/udp") as f:
+            next(f)
+            for line in f:
+                cols = line.split()
+                port = int(cols[1].rsplit(":", 1)[1], 16)
+                if port in want:
+                    drops[port] += int(cols[-1])
+    except OSError:
+        pass
+    return drops
+
+
+def udp_port_bound(port: int) -> bool:
+    return port in _udp_ports()
+
+
+def _udp_ports() -> set[int]:
+    ports = set()
+    try:
+        with open("/proc/net/udp") as f:
+            next(f)
+            for line in f:
+                ports.add(int(line.split()[1].rsplit(":", 1)[1], 16))
+    except OSError:
+        pass
+    return ports
+
+
+def proc_status_kb(pid: int, key: str) -> int | None:
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith(key + ":"):
+                    return int(line.split()[1])
+    except OSError:
+        return None
+    return None
+
+
+@dataclass
+class Launched:
+    name: str
+    popen: subprocess.Popen
+    log_path: Path
+    argv: list[str]
+
+    @property
+    def pid(self) -> int:
+        return self.popen.pid
+
+    def alive(self) -> bool:
+        return self.popen.poll() is None
+
+    def tail(self, lines: int = 6) -> str:
+        try:
+            text = self.log_path.read_text(errors="replace").splitlines()
+        except OSError:
+            return ""
+        return "\n".join(text[-lines:])
+
+    def stop(self, timeout_s: float = 10.0) -> str:
+        """SIGTERM, wait; returns a short description of how it ended."""
+        if self.popen.poll() is not None:
+            return f"had already exited with code {self.popen.returncode}"
+        self.popen.send_signal(signal.SIGTERM)
+        t0 = time.monotonic()
+        try:
+            rc = self.popen.wait(timeout_s)
+            return f"exited with code {rc} {time.monotonic() - t0:.2f} s after SIGTERM"
+        except subprocess.TimeoutExpired:
+            self.popen.kill()
+            self.popen.wait(5)
+            return f"did not exit within {timeout_s:.0f} s of SIGTERM; killed"
+
+
+def _launch(name: str, argv: list[str], workdir: Path, env: dict | None = None) -> Launched:
+    n = len(list(workdir.glob(f"{name}-*.log")))
+    log_path = workdir / f"{name}-{n}.log"
+    log = open(log_path, "ab")
+    popen = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+                             cwd=workdir, env=env, start_new_session=True)
+    log.close()
+    return Launched(name, popen, log_path, argv)
+
+
+def gcsd_available() -> tuple[bool, str]:
+    """Is gcsd importable and does ``python -m gcsd --version`` work?"""
+    try:
+        out = subprocess.run([sys.executable, "-m", "gcsd", "--version"], capture_output=True,
+                             text=True, timeout=30)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return False, str(exc)
+    text = (out.stdout + out.stderr).strip()
+    if out.returncode != 0:
+        return False, text.splitlines()[-1] if text else f"exit code {out.returncode}"
+    return True, text
+
+
+def gcsd_config(workdir: Path, channels: list[str], extra: str = "") -> Path:
+    cfg = workdir / f"gcsd-{len(list(workdir.glob('gcsd-*.yaml')))}.yaml"
+    lines = [
+        f"state_dir: {workdir / 'state'}",
+        "log: {level: warning, format: json}",
+        extra,
+        "channels:",
+        *[f"  - {c}" for c in channels],
+        "",
+    ]
+    cfg.write_text("\n".join(line for line in lines if line is not None))
+    return cfg
+
+
+def start_gcsd(workdir: Path, cfg: Path, profile_out: Path | None = None) -> Launched:
+    argv = [sys.executable]
+    if profile_out is not None:
+        argv += ["-m", "cProfile", "-o", str(profile_out)]
+    argv += ["-m", "gcsd", "run", "-c", str(cfg)]
+    return _launch("gcsd", argv, workdir)
+
+
+def routing_gcsd_config(workdir: Path, port_a: int, port_b: int) -> Path:
+    return gcsd_config(workdir, [
+        f'{{name: a, type: udp-server, address: "127.0.0.1:{port_a}", streams: {STREAMS_OFF}}}',
+        f'{{name: b, type: udp-server, address: "127.0.0.1:{port_b}", streams: {STREAMS_OFF}}}',
+    ], extra="vehicle: {sysid: 1}")
+
+
+def mavproxy_script() -> str:
+    here = Path(sys.executable).parent / "mavproxy.py"
+    if here.exists():
+        return str(here)
+    found = shutil.which("mavproxy.py")
+    if not found:
+        raise FileNotFoundError("mavproxy.py not found next to the interpreter or on PATH")
+    return found
+
+
+def start_mavproxy(workdir: Path, port_a: int, port_b: int) -> Launched:
+    argv = [sys.executable, mavproxy_script(), f"--master=udpin:127.0.0.1:{port_a}",
+            f"--out=udpout:127.0.0.1:{port_b}", "--non-interactive", "--no-state",
+            "--default-modules=", "--streamrate=-1"]
+    return _launch("mavproxy", argv, workdir)

@@ -1,0 +1,385 @@
+"""gcsd benchmark runner: routing throughput and latency against MAVProxy, and one vehicle's cost.
+
+    python -m bench                      # everything (about 6-8 minutes)
+    python -m bench --quick              # smoke run (about 1-2 minutes)
+    python -m bench throughput latency   # just these; also: harness, vehicle
+    python -m bench --routers mavproxy   # only one router (gcsd, mavproxy, or both: gcsd,mavproxy)
+
+Progress goes to stderr; the result table to stdout; ``--json FILE`` saves every figure and trial.
+See bench/README.md for the method.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, is_dataclass
+from pathlib import Path as FsPath
+
+if __package__ in (None, ""):  # run as a script: python bench/run.py
+    sys.path.insert(0, str(FsPath(__file__).resolve().parent.parent))
+
+from bench import measure  # noqa: E402
+from bench.measure import Path, SeqAllocator, log  # noqa: E402
+from bench.peers import start_receiver, start_sender  # noqa: E402
+from bench.routers import (  # noqa: E402
+    free_udp_port,
+    gcsd_available,
+    gcsd_config,
+    routing_gcsd_config,
+    start_gcsd,
+    start_mavproxy,
+)
+
+WHAT = ("harness", "throughput", "latency", "vehicle")
+LATENCY_RATE = 1000
+
+
+def machine() -> dict:
+    model = ""
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"nproc": os.cpu_count(), "cpu": model, "python": platform.python_version(),
+            "kernel": platform.release(), "date": time.strftime("%Y-%m-%d %H:%M:%S"), "gcsd_commit": _commit()}
+
+
+def _commit() -> str:
+    """HEAD of the repository bench/ lives in, with '+dirty' if src/ has uncommitted changes."""
+    root = FsPath(__file__).resolve().parent.parent
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True,
+                              text=True, timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "src"], cwd=root, capture_output=True,
+                               text=True, timeout=10).stdout.strip()
+    except (OSError, subprocess.TimeoutExpired):
+        return "unknown"
+    return (head or "unknown") + ("+dirty" if dirty else "")
+
+
+def parse_args(argv):
+    p = argparse.ArgumentParser(prog="python -m bench", description=__doc__.split("\n")[0])
+    p.add_argument("what", nargs="*", metavar="WHAT",
+                   help=f"measurements to run: {', '.join(WHAT)} or all (default all)")
+    p.add_argument("--quick", action="store_true", help="short trials, coarse search: a smoke run")
+    p.add_argument("--routers", default="gcsd,mavproxy", help="comma list of gcsd, mavproxy")
+    p.add_argument("--trial-s", type=float, help="seconds per throughput trial (5; quick 1)")
+    p.add_argument("--precision", type=float, help="bisection stops within this fraction (0.05; quick 0.2)")
+    p.add_argument("--latency-s", type=float, help="seconds of latency sampling (10; quick 2)")
+    p.add_argument("--cpu-s", type=float, help="seconds of the vehicle CPU window (30; quick 5)")
+    p.add_argument("--start-samples", type=int, help="launches timed to first HEARTBEAT (5; quick 1)")
+    p.add_argument("--profile-gcsd", metavar="DIR",
+                   help="run gcsd under cProfile; write DIR/gcsd-routing.prof and DIR/gcsd-vehicle.prof")
+    p.add_argument("--json", metavar="FILE", help="write all figures and trials as JSON")
+    p.add_argument("--keep", action="store_true", help="keep the temporary directory (configs, logs)")
+    a = p.parse_args(argv)
+    what = set(a.what or ["all"])
+    for w in what - {*WHAT, "all"}:
+        p.error(f"unknown measurement {w!r}; choose from {', '.join(WHAT)}, all")
+    a.what = set(WHAT) if "all" in what else what
+    a.routers = [r.strip() for r in a.routers.split(",") if r.strip()]
+    for r in a.routers:
+        if r not in ("gcsd", "mavproxy"):
+            p.error(f"unknown router {r!r}")
+    q = a.quick
+    a.trial_s = a.trial_s or (1.0 if q else 5.0)
+    a.precision = a.precision or (0.2 if q else 0.05)
+    a.latency_s = a.latency_s or (2.0 if q else 10.0)
+    a.cpu_s = a.cpu_s or (5.0 if q else 30.0)
+    a.start_samples = a.start_samples or (1 if q else 5)
+    return a
+
+
+def _jsonable(x):
+    if is_dataclass(x):
+        return {k: _jsonable(v) for k, v in asdict(x).items() if k not in ("report", "send_stamps")}
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items() if k not in ("report", "send_stamps", "stamps")}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+class Runner:
+    def __init__(self, args) -> None:
+        self.a = args
+        self.workdir = FsPath(tempfile.mkdtemp(prefix="gcsd-bench-"))
+        self.seqs = SeqAllocator()
+        self.sender = None
+        self.receiver = None
+        self.res: dict = {"machine": machine(), "args": {k: (sorted(v) if isinstance(v, set) else v)
+                                                         for k, v in vars(args).items()}}
+        self.notes: list[str] = []
+
+    # -------------------------------------------------------------------------------- helpers
+    def peers(self):
+        if self.sender is None:
+            self.sender = start_sender()
+            self.receiver = start_receiver()
+            log(f"sender pid {self.sender.pid}, receiver pid {self.receiver.pid} "
+                f"(port {self.receiver.port}, SO_RCVBUF {self.receiver.info[0]} bytes)")
+        return self.sender, self.receiver
+
+    def direct_path(self) -> Path:
+        s, r = self.peers()
+        s.call("dest", ("127.0.0.1", r.port))
+        r.call("peer", None, False)
+        return Path("direct", s, r, self.seqs, ports={"receiver": r.port})
+
+    def router_path(self, name: str) -> Path:
+        s, r = self.peers()
+        port_a = free_udp_port()
+        if name == "gcsd":
+            port_b = free_udp_port()
+            cfg = routing_gcsd_config(self.workdir, port_a, port_b)
+            prof = self._profile("gcsd-routing.prof")
+            router = start_gcsd(self.workdir, cfg, prof)
+            s.call("dest", ("127.0.0.1", port_a))
+            r.call("peer", ("127.0.0.1", port_b), False)  # receiver is a udp-server client of channel b
+        else:
+            router = start_mavproxy(self.workdir, port_a, r.port)
+            s.call("dest", ("127.0.0.1", port_a))
+            r.call("peer", None, True)  # heartbeat back to MAVProxy's --out socket once it is seen
+        ports = {"router-in": port_a, "receiver": r.port}
+        if name == "gcsd":
+            ports["router-b"] = port_b
+        path = Path(name, s, r, self.seqs, router, ports)
+        took = measure.wait_path_ready(path)
+        log(f"[{name}] pid {router.pid}: routing after {took:.2f} s ({' '.join(router.argv[1:])})")
+        return path
+
+    def _profile(self, filename: str):
+        if not self.a.profile_gcsd:
+            return None
+        d = FsPath(self.a.profile_gcsd).resolve()
+        d.mkdir(parents=True, exist_ok=True)
+        return d / filename
+
+    def close(self) -> None:
+        for p in (self.sender, self.receiver):
+            if p is not None:
+                p.close()
+        if self.a.keep:
+            log(f"kept {self.workdir}")
+        else:
+            shutil.rmtree(self.workdir, ignore_errors=True)
+
+    # ----------------------------------------------------------------------------- measurements
+    def run(self) -> None:
+        a = self.a
+        if "gcsd" in a.routers or "vehicle" in a.what:
+            ok, text = gcsd_available()
+            self.res["gcsd_version"] = text
+            if not ok:
+                self.notes.append(f"gcsd not runnable ({text}); its columns are n/a")
+                a.routers = [r for r in a.routers if r != "gcsd"]
+                a.what.discard("vehicle")
+                log(f"gcsd not runnable: {text}")
+        if a.what & {"harness", "throughput", "latency"}:
+            self.harness()
+        for name in a.routers:
+            if a.what & {"throughput", "latency"}:
+                self.routed(name)
+        if "vehicle" in a.what:
+            self.vehicle()
+
+    def harness(self) -> None:
+        a = self.a
+        path = self.direct_path()
+        log("[direct] harness alone: sender -> receiver, no router")
+        h = self.res.setdefault("direct", {})
+        if "harness" in a.what or "throughput" in a.what:
+            # only needs to show that sender and receiver outrun any router: up to 200 k/s, 2 s trials
+            sr = measure.search_throughput(path, min(a.trial_s, 2.0), max(a.precision, 0.1), start_rate=25000,
+                                           max_rate=200_000, confirm=False)
+            h["throughput"] = sr
+        if "latency" in a.what:
+            h["latency"] = measure.measure_latency(path, LATENCY_RATE, a.latency_s)
+
+    def routed(self, name: str) -> None:
+        a = self.a
+        r = self.res.setdefault(name, {})
+        try:
+            path = self.router_path(name)
+        except (TimeoutError, measure.RouterDied) as exc:
+            r["error"] = str(exc)
+            self.notes.append(f"{name}: {exc}")
+            log(f"[{name}] FAILED: {exc}")
+            return
+        try:
+            if "throughput" in a.what:
+                cap = self.res.get("direct", {}).get("throughput")
+                max_rate = cap.rate if cap and cap.rate else 200_000
+                sr = measure.search_throughput(path, a.trial_s, a.precision, max_rate=max_rate,
+                                               confirm=not a.quick)
+                r["throughput"] = sr
+                if cap and sr.rate >= cap.rate:
+                    self.notes.append(f"{name}: routed rate reached the harness capacity; figure is a lower bound")
+            if "latency" in a.what:
+                r["latency"] = measure.measure_latency(path, LATENCY_RATE, a.latency_s)
+        except (measure.RouterDied, TimeoutError) as exc:
+            r["error"] = str(exc)
+            self.notes.append(f"{name}: {exc}")
+            log(f"[{name}] FAILED: {exc}")
+        finally:
+            r["stop"] = path.router.stop()
+            log(f"[{name}] {r['stop']}")
+
+    def vehicle(self) -> None:
+        a = self.a
+        port = free_udp_port()
+        cfg = gcsd_config(self.workdir, [f'{{name: gcs, type: udp-server, address: "127.0.0.1:{port}"}}'])
+        prof = self._profile("gcsd-vehicle.prof")
+        log(f"[gcsd] one vehicle, default rates, two ground stations; {a.start_samples} timed start(s), "
+            f"{a.cpu_s:.0f} s CPU window")
+        try:
+            self.res.setdefault("gcsd", {})["vehicle"] = measure.measure_vehicle(
+                lambda: start_gcsd(self.workdir, cfg, prof), port, a.cpu_s, a.start_samples)
+        except RuntimeError as exc:
+            self.notes.append(f"gcsd vehicle: {exc}")
+            log(f"[gcsd] vehicle FAILED: {exc}")
+
+    # ----------------------------------------------------------------------------------- output
+    def table(self) -> str:
+        g, m, d = self.res.get("gcsd", {}), self.res.get("mavproxy", {}), self.res.get("direct", {})
+
+        def thr(x):
+            t = x.get("throughput")
+            return None if t is None else t.rate
+
+        def tcpu(x):
+            t = x.get("throughput")
+            return None if t is None else t.router_cpu_pct
+
+        def lat(x, attr):
+            t = x.get("latency")
+            return None if t is None else getattr(t, attr)
+
+        def added(x, attr):
+            v, base = lat(x, attr), lat(d, attr)
+            return None if v is None or base is None else v - base
+
+        veh = g.get("vehicle")
+        starts = sorted(veh.start_to_heartbeat_s) if veh else []
+        rows = [
+            ("packets routed between two UDP channels, no loss (pkt/s)", thr(g), thr(m), "hi", ">= 40000",
+             lambda v: v >= 40000),
+            ("  router CPU at that rate (% of one core)", tcpu(g), tcpu(m), None, "", None),
+            (f"latency through router, p50, {LATENCY_RATE} pkt/s (ms)", lat(g, "p50_ms"), lat(m, "p50_ms"), "lo", "", None),
+            (f"latency through router, p99, {LATENCY_RATE} pkt/s (ms)", lat(g, "p99_ms"), lat(m, "p99_ms"), "lo", "", None),
+            ("latency added by routing, p50 (ms)", added(g, "p50_ms"), added(m, "p50_ms"), "lo", "", None),
+            (f"latency added by routing, p99, {LATENCY_RATE} pkt/s (ms)", added(g, "p99_ms"), added(m, "p99_ms"), "lo",
+             "<= 1", lambda v: v <= 1.0),
+            ("CPU, one vehicle, default rates, 2 GCS (% of one core)", veh.cpu_pct if veh else None, None, None,
+             "<= 3", lambda v: v <= 3.0),
+            ("resident memory, one vehicle (MB)", veh.rss_mb if veh else None, None, None, "<= 60",
+             lambda v: v <= 60.0),
+            ("start to first HEARTBEAT, median (s)", starts[len(starts) // 2] if starts else None, None, None,
+             "<= 1", lambda v: v <= 1.0),
+            ("start to first HEARTBEAT, worst (s)", starts[-1] if starts else None, None, None, "<= 1",
+             lambda v: v <= 1.0),
+        ]
+
+        def fmt(v):
+            if v is None:
+                return "n/a"
+            if abs(v) >= 1000:
+                return f"{v:,.0f}"
+            if abs(v) >= 10:
+                return f"{v:.1f}"
+            return f"{v:.3f}"
+
+        head = ("metric", "gcsd", "MAVProxy", "gcsd/MAVProxy", "SPEC target", "gcsd meets")
+        body = []
+        for name, gv, mv, better, target, ok in rows:
+            if gv is None and mv is None:
+                continue
+            ratio = "n/a"
+            if gv is not None and mv not in (None, 0):
+                ratio = f"{gv / mv:.2f}" + {"hi": " (higher better)", "lo": " (lower better)"}.get(better, "")
+            meets = "" if ok is None or gv is None else ("yes" if ok(gv) else "NO")
+            body.append((name, fmt(gv), fmt(mv), ratio, target, meets))
+        widths = [max(len(r[i]) for r in (head, *body)) for i in range(len(head))]
+        line = lambda r: "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))  # noqa: E731
+        out = [line(head), "  ".join("-" * w for w in widths), *map(line, body)]
+
+        mc = self.res["machine"]
+        out.insert(0, f"gcsd bench, {mc['date']}, {mc['nproc']} CPUs ({mc['cpu']}), Python {mc['python']}, "
+                      f"{'quick' if self.a.quick else 'full'} run, gcsd at {mc['gcsd_commit']}")
+        out.insert(1, "")
+        extra = []
+        dt = d.get("throughput")
+        if dt is not None:
+            extra.append(f"harness alone (sender -> receiver, no router): {dt.rate:,.0f} pkt/s without loss"
+                         + (" (sender-limited)" if dt.sender_limited else ""))
+        if d.get("latency") is not None:
+            dl = d["latency"]
+            extra.append(f"direct-path latency baseline at {LATENCY_RATE} pkt/s: p50 {dl.p50_ms:.3f} ms, "
+                         f"p99 {dl.p99_ms:.3f} ms")
+        for name, x in (("gcsd", g), ("MAVProxy", m)):
+            t = x.get("throughput")
+            if t is not None and t.sender_limited:
+                extra.append(f"{name}: throughput search stopped by the sender (figure is a lower bound)")
+            if t is not None and not self.a.quick and not t.confirmed and not t.sender_limited:
+                extra.append(f"{name}: no rate stayed clean over a {2 * self.a.trial_s:.0f} s confirmation "
+                             f"trial; the figure is the best {self.a.trial_s:.0f} s trial")
+        if veh is not None:
+            extra.append(f"vehicle: {', '.join(f'{v:.1f}' for v in veh.msgs_per_s)} msgs/s to the two ground "
+                         f"stations; VmHWM {veh.hwm_mb:.1f} MB; start samples "
+                         f"{', '.join(f'{s:.3f}' for s in veh.start_to_heartbeat_s)} s (UDP port bound after "
+                         f"{', '.join(f'{s:.3f}' for s in veh.port_bound_s)} s); gcsd {veh.stop}")
+        others = []
+        for x in (g, m, d):
+            if x.get("throughput") is not None:
+                others += [t.other_cpu_pct for t in x["throughput"].trials]
+            if x.get("latency") is not None:
+                others.append(x["latency"].other_cpu_pct)
+        if others:
+            extra.append(f"CPU used by processes outside the benchmark during trials: max {max(others):.0f} %, "
+                         f"median {sorted(others)[len(others) // 2]:.0f} % of one core"
+                         + (" -- the machine was not idle, figures are pessimistic" if max(others) > 10 else ""))
+        extra += self.notes
+        if extra:
+            out += ["", *extra]
+        return "\n".join(out)
+
+
+def main(argv=None) -> int:
+    args = parse_args(sys.argv[1:] if argv is None else argv)
+    runner = Runner(args)
+    t0 = time.monotonic()
+    try:
+        runner.run()
+    except KeyboardInterrupt:
+        log("interrupted")
+    finally:
+        runner.close()
+    runner.res["elapsed_s"] = time.monotonic() - t0
+    end_commit = _commit()
+    if end_commit != runner.res["machine"]["gcsd_commit"]:
+        runner.notes.append(f"gcsd changed during the run: {runner.res['machine']['gcsd_commit']} at the start, "
+                            f"{end_commit} at the end")
+    print(runner.table())
+    if args.json:
+        FsPath(args.json).write_text(json.dumps(_jsonable(runner.res), indent=2) + "\n")
+        log(f"wrote {args.json}")
+    failed = [n for n in args.routers if "error" in runner.res.get(n, {})]
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
