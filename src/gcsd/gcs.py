@@ -20,7 +20,6 @@ from .codec import Frame
 from .config import Config
 from .node import VehicleNode
 from .router import MSG_ID_HEARTBEAT, MSG_ID_RADIO, MSG_ID_RADIO_STATUS, Router
-from .sim import VehicleState
 from .transport import run_channel
 from .vehicles import vehicle_type
 
@@ -40,20 +39,9 @@ class GCS:
         self.active: set[int] = set()
         self.opened: set[int] = set()
         self.all_open = asyncio.Event()
-        vcfg = config.vehicle
-        vtype = vehicle_type(vcfg.type)
+        vtype = vehicle_type(config.vehicle.type)
         self.nodes = [
-            VehicleNode(
-                vcfg.sysid + i, vcfg.compid, vtype,
-                VehicleState(
-                    lat=vcfg.home.lat, lon=vcfg.home.lon, alt_amsl_m=vcfg.home.alt,
-                    home_lat=vcfg.home.lat, home_lon=vcfg.home.lon, home_alt_m=vcfg.home.alt,
-                    mode=vtype.initial_mode,
-                ),
-                self.clock, self.channels, self.wake,
-                gcs_sysid=config.gcs.sysid, enforce_gcs_sysid=config.gcs.enforce_sysid, speedup=vcfg.speedup,
-            )
-            for i in range(vcfg.count)
+            VehicleNode(i, config, vtype, self.clock, self.channels, self.wake) for i in range(config.vehicle.count)
         ]
         self._by_sysid = {n.sysid: n for n in self.nodes}
         self.router = Router({(n.sysid, n.compid) for n in self.nodes}, [ch.policy for ch in self.channels])
@@ -136,6 +124,8 @@ class GCS:
             await stop.wait()
             for task in tasks:
                 task.cancel()
+        for node in self.nodes:
+            node.close()
 
     async def _log_stats(self) -> None:
         while True:

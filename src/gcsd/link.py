@@ -26,6 +26,7 @@ class Link:
         self._producible = producible
         self._wake = wake
         self.stream_rates: dict[str, float] = dict(channel.config.streams)
+        self._slow_reasons: set[str] = set()
         self.scheduler.set_interval(M.MAVLINK_MSG_ID_HEARTBEAT, HEARTBEAT_MS, now)
         for stream, rate in self.stream_rates.items():
             self.set_stream_rate(stream, rate, now)
@@ -56,6 +57,14 @@ class Link:
     def push(self, msgid: int) -> None:
         self.scheduler.push(msgid)
         self._wake()
+
+    def set_slow(self, reason: str, active: bool) -> None:
+        """Streams go x4 slower while any reason holds (a parameter list, a mission upload, FTP)."""
+        if active:
+            self._slow_reasons.add(reason)
+        else:
+            self._slow_reasons.discard(reason)
+        self.scheduler.slow_factor = 4 if self._slow_reasons else 1
 
     def radio_txbuf(self, txbuf_pct: int, now: float) -> None:
         s = self.scheduler

@@ -12,6 +12,7 @@ keep running.
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Callable
 
 import structlog
@@ -20,14 +21,18 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from .channel import MAX_FRAME_BYTES, Channel
 from .clock import Clock
 from .codec import Frame
+from .config import Config
 from .link import Link
+from .params import ParamStore, base_params
 from .services import Incoming
 from .services.commands import CommandService
 from .services.control import ControlService
+from .services.params import ParamService
 from .services.rates import RatesService
 from .services.statustext import StatusTextQueue
 from .services.timesync import TimesyncService
 from .sim import Simulation, VehicleState
+from .streams import PARAM_SUFFIX, STREAM_NAMES
 from .telemetry import PRODUCERS
 from .vehicles import VehicleType
 
@@ -40,43 +45,94 @@ BANNER = ("gcsd 0.1.0 (ArduPilot-compatible MAVLink vehicle)",)
 class VehicleNode:
     def __init__(
         self,
-        sysid: int,
-        compid: int,
+        index: int,
+        config: Config,
         vehicle: VehicleType,
-        state: VehicleState,
         clock: Clock,
         channels: list[Channel],
         wake: Callable[[Channel], None],
-        gcs_sysid: int = 255,
-        enforce_gcs_sysid: bool = False,
-        speedup: float = 1.0,
     ) -> None:
-        self.sysid = sysid
-        self.compid = compid
+        vcfg = config.vehicle
+        self.index = index
         self.vehicle = vehicle
-        self.state = state
         self.clock = clock
         self.channels = channels
-        self.gcs_sysid = gcs_sysid
-        self.enforce_gcs_sysid = enforce_gcs_sysid
+        self.state_dir = _vehicle_state_dir(config, index)
+        self.params = ParamStore(
+            base_params(
+                vcfg.sysid + index, config.gcs.sysid, config.gcs.enforce_sysid,
+                [dict(ch.config.streams) for ch in channels],
+            )
+        )
+        self.param_service = ParamService(self, self.params, self.state_dir / "mav.parm" if self.state_dir else None)
+        self.param_service.load(config.params_file)
+        self.params.set("STAT_BOOTCNT", self.params.get("STAT_BOOTCNT") + 1, force=True)
+        self.sysid = int(self.params.get("SYSID_THISMAV"))
+        self.compid = vcfg.compid
+        self.min_interval_ms = max(1, 1250 // int(self.params.get("SCHED_LOOP_RATE")))
         now = clock.now()
-        self.sim = Simulation(state, now, speedup)
+        home = vcfg.home
+        self.state = VehicleState(
+            lat=home.lat, lon=home.lon, alt_amsl_m=home.alt,
+            home_lat=home.lat, home_lon=home.lon, home_alt_m=home.alt, mode=vehicle.initial_mode,
+            capacity_mah=float(self.params.get("BATT_CAPACITY")),
+        )
+        self.sim = Simulation(self.state, now, vcfg.speedup)
         self.statustext = StatusTextQueue()
         self.handler_errors = 0
         self._wake = wake
         self.links = [Link(ch, now, self._producible, lambda ch=ch: wake(ch)) for ch in channels]
+        self._wire_params(now)
         self.control = ControlService(self)
         self.rates = RatesService(self)
-        self.services = [self.control, self.rates, TimesyncService(self)]
+        self.services = [self.control, self.rates, TimesyncService(self), self.param_service]
         table: dict[int, Callable] = {}
         for service in self.services:
             table.update(service.commands())
         table.update({cmd: (lambda req, h=h: h(self, req)) for cmd, h in vehicle.commands.items()})
         self.commands = CommandService(self, table)
         self.services.append(self.commands)
+        self._build_dispatch()
+        try:
+            self.param_service.save()  # the boot count
+        except OSError as exc:
+            log.error("params_save_failed", error=str(exc))
+
+    def _build_dispatch(self) -> None:
         self.handlers: dict[str, Callable[[Incoming], None]] = {}
         for service in self.services:
             self.handlers.update(service.message_handlers())
+        self._senders = [s for s in self.services if hasattr(s, "pending")]
+
+    def add_service(self, service) -> None:
+        """Attach a service (missions, FTP...): its handlers, commands and capabilities."""
+        self.services.append(service)
+        self.commands.table.update(service.commands())
+        self._build_dispatch()
+
+    def _wire_params(self, now: float) -> None:
+        """Parameters that act at once; the rest are read where they are used."""
+        params = self.params
+        for link in self.links:
+            for stream in STREAM_NAMES:
+                name = f"SR{link.channel.index}_{PARAM_SUFFIX[stream]}"
+                link.set_stream_rate(stream, params.get(name), now)
+                params.on_change(name, lambda _n, v, link=link, stream=stream: link.set_stream_rate(stream, v, self.clock.now()))
+        self.gcs_sysid = int(params.get("SYSID_MYGCS"))
+        self.enforce_gcs_sysid = bool(params.get("SYSID_ENFORCE"))
+        params.on_change("SYSID_MYGCS", lambda _n, v: setattr(self, "gcs_sysid", int(v)))
+        params.on_change("SYSID_ENFORCE", lambda _n, v: setattr(self, "enforce_gcs_sysid", bool(v)))
+        params.on_change("BATT_CAPACITY", lambda _n, v: setattr(self.state, "capacity_mah", float(v)))
+
+    def wake(self, channel: Channel) -> None:
+        self._wake(channel)
+
+    def close(self) -> None:
+        """Flush state at a clean stop."""
+        try:
+            self.param_service.save()
+        except OSError as exc:
+            log.error("params_save_failed", error=str(exc))
 
     # --- identity and time -----------------------------------------------------------------
     def capabilities(self) -> int:
@@ -145,13 +201,36 @@ class VehicleNode:
             link.push(M.MAVLINK_MSG_ID_HEARTBEAT)
 
     def prearm_failures(self) -> list[str]:
-        """The pre-arm checks the core knows about; vehicle types add theirs."""
+        """The pre-arm checks the core knows about, driven by parameters (ARMING_CHECK 0: none)."""
+        p = self.params.get
+        if p("ARMING_CHECK") == 0:
+            return []
         s = self.state
         failures = []
+        if not 1000 <= p("ANGLE_MAX") <= 8000:
+            failures.append("Check ANGLE_MAX")
         if s.gps_fix_type < 3:
             failures.append("GPS: no 3D fix")
+        elif s.hdop * 100 > p("GPS_HDOP_GOOD"):
+            failures.append(f"GPS: HDOP {s.hdop:.2f} too high")
+        if p("BATT_ARM_VOLT") > 0 and s.battery_voltage_v < p("BATT_ARM_VOLT"):
+            failures.append(f"Battery below minimum arming voltage ({s.battery_voltage_v:.1f}V)")
+        if p("BATT_ARM_MAH") > 0 and s.capacity_mah - s.consumed_mah < p("BATT_ARM_MAH"):
+            failures.append("Battery below minimum arming capacity")
         if s.battery_remaining_pct < 10:
             failures.append(f"Battery below minimum ({s.battery_remaining_pct}%)")
+        for n in range(1, 5):
+            lo, hi, trim = p(f"RC{n}_MIN"), p(f"RC{n}_MAX"), p(f"RC{n}_TRIM")
+            if lo > 1300:
+                failures.append(f"RC{n}_MIN too high")
+            elif hi < 1700:
+                failures.append(f"RC{n}_MAX too low")
+            elif not lo <= trim <= hi:
+                failures.append(f"RC{n}_TRIM out of range")
+        if p("COMPASS_USE"):
+            worst = max(abs(p("COMPASS_OFS_X")), abs(p("COMPASS_OFS_Y")), abs(p("COMPASS_OFS_Z")))
+            if worst > p("COMPASS_OFFS_MAX"):
+                failures.append("Compass offsets too high")
         return failures
 
     def send_pass(self, channel: Channel, now: float) -> float | None:
@@ -181,4 +260,20 @@ class VehicleNode:
         finished = link.scheduler.run(now, send) and self.statustext.drain(channel.index, now, send_text)
         if not finished:
             return now + max(channel.budget_wait_s(), 0.001)
-        return link.scheduler.next_deadline(now)
+        deadline = link.scheduler.next_deadline(now)
+
+        def send_msg(msg) -> bool:
+            return channel.send_message(msg, sysid, compid)
+
+        for service in self._senders:
+            d = service.pending(channel, now, send_msg)
+            if d is not None and (deadline is None or d < deadline):
+                deadline = d
+        return deadline
+
+
+def _vehicle_state_dir(config: Config, index: int) -> Path:
+    """state_dir for a single vehicle; state_dir/vehicle-N for the N-th vehicle of a swarm."""
+    if config.vehicle.count == 1:
+        return Path(config.state_dir)
+    return Path(config.state_dir) / f"vehicle-{index + 1}"

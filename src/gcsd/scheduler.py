@@ -28,7 +28,7 @@ from typing import Callable
 
 NUM_BUCKETS = 10
 MAX_INTERVAL_MS = 60_000
-MIN_INTERVAL_MS = 3  # 0.8 x a 400 Hz loop, ArduPilot's cap_message_interval for a copter
+MIN_INTERVAL_MS = 1  # backstop; the real cap (SCHED_LOOP_RATE) is applied where requests are accepted
 
 
 @dataclass(slots=True)

@@ -40,6 +40,7 @@ class VehicleState:
     satellites: int = 12
     hdop: float = 0.7
     consumed_mah: float = 0.0
+    capacity_mah: float = BATTERY_CAPACITY_MAH
     current_a: float = IDLE_CURRENT_A
     has_home: bool = True
 
@@ -57,7 +58,9 @@ class VehicleState:
 
     @property
     def battery_remaining_pct(self) -> int:
-        return max(0, min(100, round(100.0 * (1.0 - self.consumed_mah / BATTERY_CAPACITY_MAH))))
+        if self.capacity_mah <= 0:
+            return 100
+        return max(0, min(100, round(100.0 * (1.0 - self.consumed_mah / self.capacity_mah))))
 
     @property
     def battery_voltage_v(self) -> float:
@@ -84,4 +87,4 @@ class Simulation:
         s = self.state
         s.current_a = ARMED_CURRENT_A if s.armed else IDLE_CURRENT_A
         s.throttle_pct = 15 if s.armed else 0
-        s.consumed_mah = min(BATTERY_CAPACITY_MAH, s.consumed_mah + s.current_a * dt * 1000.0 / 3600.0)
+        s.consumed_mah = min(max(s.capacity_mah, 0.0), s.consumed_mah + s.current_a * dt * 1000.0 / 3600.0)

@@ -135,23 +135,39 @@ def scaled_pressure(node, channel, now):
     return M.MAVLink_scaled_pressure_message(node.time_boot_ms(now), press_hpa, 0.0, 2500)
 
 
+MOTOR_FUNCTIONS = range(33, 41)
+
+
+def _servo_pwm(node, n: int) -> int:
+    """SERVOn_ scaling: motors follow the throttle between MIN and MAX, others sit at TRIM."""
+    p = node.params.get
+    lo, hi = p(f"SERVO{n}_MIN"), p(f"SERVO{n}_MAX")
+    if p(f"SERVO{n}_FUNCTION") in MOTOR_FUNCTIONS:
+        frac = node.state.throttle_pct / 100.0
+        if p(f"SERVO{n}_REVERSED"):
+            frac = 1.0 - frac
+        return int(lo + (hi - lo) * frac) if node.state.armed else int(lo)
+    return int(p(f"SERVO{n}_TRIM")) if p(f"SERVO{n}_FUNCTION") != 0 else 0
+
+
 def servo_output_raw(node, channel, now):
-    pwm = 1000 + 10 * node.state.throttle_pct
-    return M.MAVLink_servo_output_raw_message(node.time_usec(now) & 0xFFFFFFFF, 0, pwm, pwm, pwm, pwm, 0, 0, 0, 0)
+    pwm = [_servo_pwm(node, n) for n in range(1, 17)]
+    return M.MAVLink_servo_output_raw_message(node.time_usec(now) & 0xFFFFFFFF, 0, *pwm)
 
 
-def _rc_values():
-    return [1500, 1500, 1000, 1500, 1100, 1100, 1100, 1100]
+def _rc_values(node, count: int) -> list[int]:
+    """Sticks at rest: each RC input at its RCn_TRIM."""
+    return [int(node.params.get(f"RC{n}_TRIM")) for n in range(1, count + 1)]
 
 
 def rc_channels(node, channel, now):
-    return M.MAVLink_rc_channels_message(node.time_boot_ms(now), 8, *_rc_values(), *([0] * 10), 255)
+    return M.MAVLink_rc_channels_message(node.time_boot_ms(now), 16, *_rc_values(node, 16), 0, 0, 255)
 
 
 def rc_channels_raw(node, channel, now):
     if not channel.mavlink1:
         return None  # ArduPilot only emits the legacy message on MAVLink1 links
-    return M.MAVLink_rc_channels_raw_message(node.time_boot_ms(now), 0, *_rc_values(), 255)
+    return M.MAVLink_rc_channels_raw_message(node.time_boot_ms(now), 0, *_rc_values(node, 8), 255)
 
 
 def nav_controller_output(node, channel, now):

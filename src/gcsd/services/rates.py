@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from ..scheduler import MAX_INTERVAL_MS, MIN_INTERVAL_MS
+from ..scheduler import MAX_INTERVAL_MS
 from ..streams import REQUEST_DATA_STREAM_IDS
 from ..telemetry import PRODUCERS
 from . import Incoming, Service
@@ -80,7 +80,7 @@ class RatesService(Service):
         if interval_us < 0:
             return _DENIED
         interval_ms = min(max(int(interval_us // 1000), 1), MAX_INTERVAL_MS)
-        if interval_ms < MIN_INTERVAL_MS:
+        if interval_ms < self.node.min_interval_ms:
             self.node.send_text(
                 M.MAV_SEVERITY_WARNING,
                 f"Requested rate for message ID {msgid} too fast. Increase SCHED_LOOP_RATE",
