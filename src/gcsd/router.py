@@ -22,8 +22,10 @@ channels?". It never touches a socket or a clock; `now` is passed in. Rules, in 
 8. Processed locally if it was addressed to us, or nothing was forwarded and the target system
    is ours, or it was a broadcast.
 
-Unknown message ids (no target field can be read) are forwarded as broadcasts and not processed.
-Never out of the ingress channel; at most one copy per channel.
+Unknown message ids (no target field can be read) are forwarded as broadcasts and not processed,
+but only from a source already learned from good frames on the same channel: their CRC cannot be
+checked, so noise on a link would otherwise create routes and be re-broadcast everywhere. They
+never create a route themselves. Never out of the ingress channel; at most one copy per channel.
 """
 
 from __future__ import annotations
@@ -113,6 +115,7 @@ class Router:
         self.local_sysids = frozenset(s for s, _ in local)
         self.policies = list(policies)
         self.table = table if table is not None else RouteTable()
+        self.unknown_dropped = 0  # unknown-id frames from sources never seen with a good frame
 
     def decide(
         self,
@@ -129,6 +132,8 @@ class Router:
     ) -> Decision:
         if (sysid, compid) in self.local:
             return IGNORE
+        if not known_message:
+            return self._unknown_message(in_channel, sysid, compid, now)
         if sysid != 0 and not (sysid in self.local_sysids and compid == 0):
             self.table.learn(sysid, compid, in_channel, now, mavtype)
         if msgid == MSG_ID_RADIO_STATUS or msgid == MSG_ID_RADIO:
@@ -139,10 +144,6 @@ class Router:
             if closed_in:
                 return Decision(True)
             return Decision(True, self._heartbeat_channels(in_channel, sysid, compid, active_channels))
-        if not known_message:
-            if closed_in:
-                return IGNORE
-            return Decision(False, self._broadcast_channels(in_channel))
 
         broadcast_system = target_system <= 0
         broadcast_component = target_component <= 0
@@ -178,6 +179,14 @@ class Router:
                 out.append(ch)
         process = addressed_to_us or (not out and match_system) or broadcast_system
         return Decision(process, tuple(out))
+
+    def _unknown_message(self, in_channel: int, sysid: int, compid: int, now: float) -> Decision:
+        policy = self.policies[in_channel]
+        if policy.private or policy.no_forward or not self.table.has(sysid, compid, in_channel):
+            self.unknown_dropped += 1
+            return IGNORE
+        self.table.learn(sysid, compid, in_channel, now)  # refresh only: the route exists
+        return Decision(False, self._broadcast_channels(in_channel))
 
     def _local_compid(self, target_system: int, target_component: int, broadcast_system: bool) -> bool:
         if broadcast_system:

@@ -180,3 +180,15 @@ def test_route_remembers_mavtype_from_first_heartbeat():
     table.learn(5, 1, 0, now=1.0, mavtype=2)
     table.learn(5, 1, 0, now=2.0, mavtype=6)
     assert [r.mavtype for r in table] == [2]
+
+
+def test_unknown_message_from_an_unseen_source_is_dropped_and_not_learned():
+    router = make_router()
+    assert decide(router, 0, (42, 7), 42424, -1, -1, known=False) == Decision(False, ())
+    assert not router.table.has(42, 7, 0)
+    assert router.unknown_dropped == 1
+
+
+def test_unknown_message_from_a_private_channel_is_not_forwarded():
+    router = make_router(PRIVATE_2)
+    assert decide(router, 2, CAM, 42424, -1, -1, known=False) == Decision(False, ())
