@@ -1,0 +1,277 @@
+"""The parameter protocol against the real daemon: list downloads, reads, sets, persistence,
+two ground stations, a lossy link and a slow link."""
+
+from __future__ import annotations
+
+import math
+import random
+import select
+import socket
+import threading
+import time
+
+import pytest
+
+from .helpers import M, Client, is_type, pump, rate_hz, udp_channel, udp_url, wait_for
+
+VEHICLE = (1, 1)
+
+
+def param_name(msg) -> str:
+    name = msg.param_id
+    return name.decode() if isinstance(name, bytes) else name
+
+
+def request_list(c: Client) -> int:
+    mark = c.mark()
+    c.send(M.MAVLink_param_request_list_message(*VEHICLE))
+    return mark
+
+
+def download(c: Client, timeout: float = 10.0, others=()) -> dict[int, tuple[str, float, int]]:
+    """Full list download as MAVProxy does it: request, then re-request missing indices after 1 s quiet."""
+    mark = request_list(c)
+    got: dict[int, tuple[str, float, int]] = {}
+    count = None
+    deadline = time.monotonic() + timeout
+    last_new = time.monotonic()
+    seen = mark
+    while time.monotonic() < deadline:
+        pump([c, *others], 0.05)
+        for r in c.received[seen:]:
+            if r.type == "PARAM_VALUE" and r.src == VEHICLE:
+                count = r.msg.param_count
+                if r.msg.param_index != 65535 and r.msg.param_index not in got:
+                    got[r.msg.param_index] = (param_name(r.msg), r.msg.param_value, r.msg.param_type)
+                    last_new = time.monotonic()
+        seen = len(c.received)
+        if count is not None and len(got) == count:
+            return got
+        if count is not None and time.monotonic() - last_new > 1.0:
+            missing = [i for i in range(count) if i not in got][:10]
+            for i in missing:
+                c.send(M.MAVLink_param_request_read_message(*VEHICLE, b"", i))
+            last_new = time.monotonic()
+    raise AssertionError(f"download incomplete: {len(got)} of {count}")
+
+
+def read_param(c: Client, name: str, timeout: float = 2.0):
+    mark = c.mark()
+    c.send(M.MAVLink_param_request_read_message(*VEHICLE, name.encode(), -1))
+    r = wait_for(c, lambda r: r.type == "PARAM_VALUE" and param_name(r.msg) == name, timeout, since=mark)
+    return r.msg if r else None
+
+
+def set_param(c: Client, name: str, value: float, ptype=M.MAV_PARAM_TYPE_REAL32):
+    mark = c.mark()
+    c.send(M.MAVLink_param_set_message(*VEHICLE, name.encode(), value, ptype))
+    return mark
+
+
+def test_full_list_twice_across_a_restart_gives_identical_names_counts_and_indices(daemon, client, tmp_path):
+    conf = {"state_dir": str(tmp_path / "st"), "channels": [udp_channel("gcs")]}
+    d = daemon(conf)
+    c = client(udp_url(d.port("gcs")))
+    first = download(c)
+    assert len(first) >= 200
+    names = [first[i][0] for i in sorted(first)]
+    assert names == sorted(names) and len(set(names)) == len(names)
+    d.stop()
+    d2 = daemon(conf)
+    c2 = client(udp_url(d2.port("gcs")))
+    second = download(c2)
+    assert {i: v[0] for i, v in first.items()} == {i: v[0] for i, v in second.items()}
+    assert {i: v[2] for i, v in first.items()} == {i: v[2] for i, v in second.items()}
+
+
+def test_two_ground_stations_downloading_at_once_both_get_complete_lists(daemon, client):
+    d = daemon({"channels": [udp_channel("a"), udp_channel("b")]})
+    a = client(udp_url(d.port("a")), 255, 190)
+    b = client(udp_url(d.port("b")), 254, 190)
+    results = {}
+    request_list(a)
+    got_b = download(b, others=[a])
+    got_a = download(a, others=[b])
+    results["a"], results["b"] = got_a, got_b
+    assert len(results["a"]) == len(results["b"]) > 200
+
+
+def test_set_is_confirmed_to_every_ground_station_and_survives_a_restart(daemon, client, tmp_path):
+    conf = {"state_dir": str(tmp_path / "st"), "channels": [udp_channel("a"), udp_channel("b")]}
+    d = daemon(conf)
+    a = client(udp_url(d.port("a")), 255, 190)
+    b = client(udp_url(d.port("b")), 254, 190)
+    a.heartbeat(), b.heartbeat()
+    pump([a, b], 0.3)
+    mark_b = b.mark()
+    mark_a = set_param(a, "RC1_TRIM", 1512.0, M.MAV_PARAM_TYPE_INT16)
+    for c, mark in ((a, mark_a), (b, mark_b)):
+        r = wait_for(c, lambda r: r.type == "PARAM_VALUE" and param_name(r.msg) == "RC1_TRIM", since=mark, others=[a, b])
+        assert r is not None and r.msg.param_value == 1512.0 and r.msg.param_type == M.MAV_PARAM_TYPE_INT16
+    d.stop()
+    d2 = daemon(conf)
+    c = client(udp_url(d2.port("a")))
+    assert read_param(c, "RC1_TRIM").param_value == 1512.0
+    assert (tmp_path / "st" / "mav.parm").read_text().count("RC1_TRIM") == 1
+
+
+def test_read_by_index_and_by_name_agree(daemon, client):
+    d = daemon({"channels": [udp_channel("gcs")]})
+    c = client(udp_url(d.port("gcs")))
+    by_name = read_param(c, "ANGLE_MAX")
+    mark = c.mark()
+    c.send(M.MAVLink_param_request_read_message(*VEHICLE, b"", by_name.param_index))
+    r = wait_for(c, is_type("PARAM_VALUE", VEHICLE), since=mark)
+    assert param_name(r.msg) == "ANGLE_MAX" and r.msg.param_value == 3000.0
+
+
+def test_unknown_names_and_indices_get_no_reply(daemon, client):
+    d = daemon({"channels": [udp_channel("gcs")]})
+    c = client(udp_url(d.port("gcs")))
+    assert read_param(c, "NO_SUCH_PARAM", timeout=1.0) is None
+    mark = c.mark()
+    c.send(M.MAVLink_param_request_read_message(*VEHICLE, b"", 30000))
+    assert wait_for(c, is_type("PARAM_VALUE", VEHICLE), timeout=1.0, since=mark) is None
+
+
+def test_read_only_write_is_refused_with_text_and_old_value(daemon, client):
+    d = daemon({"channels": [udp_channel("gcs")]})
+    c = client(udp_url(d.port("gcs")))
+    old = read_param(c, "STAT_BOOTCNT").param_value
+    mark = set_param(c, "STAT_BOOTCNT", 99.0, M.MAV_PARAM_TYPE_INT16)
+    text = wait_for(c, lambda r: r.type == "STATUSTEXT" and "denied" in r.msg.text, since=mark)
+    assert text is not None and "STAT_BOOTCNT" in text.msg.text
+    r = wait_for(c, lambda r: r.type == "PARAM_VALUE" and param_name(r.msg) == "STAT_BOOTCNT", since=mark)
+    assert r.msg.param_value == old
+
+
+def test_out_of_range_value_is_refused(daemon, client):
+    d = daemon({"channels": [udp_channel("gcs")]})
+    c = client(udp_url(d.port("gcs")))
+    mark = set_param(c, "SR0_EXTRA1", 500.0)
+    assert wait_for(c, lambda r: r.type == "STATUSTEXT" and "out of range" in r.msg.text, since=mark)
+    assert read_param(c, "SR0_EXTRA1").param_value == 5.0
+
+
+@pytest.mark.parametrize("value", [math.nan, math.inf])
+def test_nan_and_infinity_change_nothing(daemon, client, value):
+    d = daemon({"channels": [udp_channel("gcs")]})
+    c = client(udp_url(d.port("gcs")))
+    mark = set_param(c, "COMPASS_OFS_X", value)
+    assert wait_for(c, lambda r: r.type == "PARAM_VALUE" and param_name(r.msg) == "COMPASS_OFS_X",
+                    timeout=1.0, since=mark) is None
+    assert read_param(c, "COMPASS_OFS_X").param_value == 5.0
+
+
+def test_integer_parameter_set_rounds_like_the_c_cast(daemon, client):
+    d = daemon({"channels": [udp_channel("gcs")]})
+    c = client(udp_url(d.port("gcs")))
+    set_param(c, "RC2_TRIM", 1519.996, M.MAV_PARAM_TYPE_INT16)
+    pump([c], 0.3)
+    assert read_param(c, "RC2_TRIM").param_value == 1520.0
+
+
+def test_changing_a_stream_rate_parameter_changes_the_measured_rate_at_once(daemon, client):
+    d = daemon({"channels": [udp_channel("gcs", streams={"extra1": 2})]})
+    c = client(udp_url(d.port("gcs")))
+    c.heartbeat()
+    pump([c], 1.0)
+    set_param(c, "SR0_EXTRA1", 20.0, M.MAV_PARAM_TYPE_INT16)
+    pump([c], 0.3)
+    mark = c.mark()
+    pump([c], 2.0)
+    assert rate_hz([r for r in c.since(mark, "ATTITUDE") if r.src == VEHICLE]) == pytest.approx(20.0, rel=0.1)
+
+
+def test_params_file_is_applied_at_start_and_bad_lines_do_not_stop_it(daemon, client, tmp_path):
+    pf = tmp_path / "start.parm"
+    pf.write_text("RC4_TRIM 1480\nthis is not a parameter line\nNO_SUCH 3\nANGLE_MAX 4500\n")
+    d = daemon({"params_file": str(pf), "channels": [udp_channel("gcs")]})
+    c = client(udp_url(d.port("gcs")))
+    assert read_param(c, "RC4_TRIM").param_value == 1480.0
+    assert read_param(c, "ANGLE_MAX").param_value == 4500.0
+
+
+def test_corrupt_saved_file_is_kept_and_defaults_are_used_for_what_cannot_be_read(daemon, client, tmp_path):
+    state = tmp_path / "st"
+    state.mkdir()
+    (state / "mav.parm").write_bytes(b"RC4_TRIM 1480\nRC5_TRIM \xff\xfe garbage\n")
+    d = daemon({"state_dir": str(state), "channels": [udp_channel("gcs")]})
+    c = client(udp_url(d.port("gcs")))
+    assert read_param(c, "RC4_TRIM").param_value == 1480.0
+    assert read_param(c, "RC5_TRIM").param_value == 1500.0
+    assert (state / "mav.parm.bad").read_bytes().startswith(b"RC4_TRIM 1480")
+
+
+class LossyProxy:
+    """A UDP proxy that drops a seeded fraction of datagrams in each direction."""
+
+    def __init__(self, target_port: int, loss: float, seed: int = 1) -> None:
+        self.front = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.front.bind(("127.0.0.1", 0))
+        self.back = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.back.connect(("127.0.0.1", target_port))
+        self.rng = random.Random(seed)
+        self.loss = loss
+        self.client_addr = None
+        self.dropped = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    @property
+    def port(self) -> int:
+        return self.front.getsockname()[1]
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            ready, _, _ = select.select([self.front, self.back], [], [], 0.05)
+            for sock in ready:
+                data, addr = sock.recvfrom(65536)
+                if self.rng.random() < self.loss:
+                    self.dropped += 1
+                    continue
+                if sock is self.front:
+                    self.client_addr = addr
+                    self.back.send(data)
+                elif self.client_addr:
+                    self.front.sendto(data, self.client_addr)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2)
+        self.front.close()
+        self.back.close()
+
+
+def test_download_completes_over_a_lossy_link_by_rerequesting_missing_indices(daemon, client):
+    d = daemon({"channels": [udp_channel("gcs")]})
+    proxy = LossyProxy(d.port("gcs"), loss=0.10, seed=7)
+    try:
+        c = client(udp_url(proxy.port))
+        got = download(c, timeout=30.0)
+        assert len(got) > 200
+        assert proxy.dropped > 10
+    finally:
+        proxy.close()
+
+
+def test_list_download_on_a_57600_baud_budget_never_exceeds_it_and_streams_resume(daemon, client):
+    budget = 5760
+    d = daemon({"channels": [udp_channel("radio", bandwidth=budget)]})
+    c = client(udp_url(d.port("radio")))
+    c.heartbeat()
+    pump([c], 1.0)
+    before = rate_hz([r for r in c.since(0, "ATTITUDE") if r.src == VEHICLE])
+    c.chunks.clear()
+    start = time.monotonic()
+    got = download(c, timeout=60.0)
+    elapsed = time.monotonic() - start
+    assert len(got) > 200
+    total = sum(len(chunk) for chunk in c.chunks)
+    # a token bucket may start with one burst of 100 ms of traffic; beyond that, the budget holds
+    assert total <= budget * elapsed + budget * 0.1 + 280, (total, elapsed)
+    mark = c.mark()
+    pump([c], 2.0)
+    after = rate_hz([r for r in c.since(mark, "ATTITUDE") if r.src == VEHICLE])
+    assert after == pytest.approx(before, rel=0.15)
