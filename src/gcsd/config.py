@@ -36,6 +36,8 @@ CHANNEL_OPTIONS = ("no_forward", "no_stream_override", "unsigned_ok", "forward_b
 LOG_LEVELS = ("debug", "info", "warning", "error")
 LOG_FORMATS = ("console", "json")
 
+DEFAULT_FTP_MAX_FILE_BYTES = 64 * 1024 * 1024
+MAX_FTP_FILE_BYTES = 0xFFFFFFFF  # FTP offsets are u32
 MAX_CHANNELS = 10  # the SRn_* parameters have one digit, n = 0..9
 MAX_STREAM_RATE_HZ = 50
 MAX_SPEEDUP = 1000
@@ -83,6 +85,7 @@ class MissionConfig:
 @dataclass(frozen=True)
 class FtpConfig:
     root: str = "ftp"
+    max_file_bytes: int = DEFAULT_FTP_MAX_FILE_BYTES  # WriteFile/TruncateFile beyond this: FailErrno EFBIG
 
 
 @dataclass(frozen=True)
@@ -186,7 +189,7 @@ _ADDRESS = re.compile(r"(?:\[(?P<ipv6>[^\]]+)\]|(?P<host>[^:\s\[\]]+)):(?P<port>
 
 
 def _config(r: _Reader, top: _Section) -> Config:
-    ftp = r.section(top["ftp"], ("root",))
+    ftp = r.section(top["ftp"], ("root", "max_file_bytes"))
     log = r.section(top["log"], ("level", "format", "tlog"))
     gcs = r.section(top["gcs"], ("sysid", "enforce_sysid"))
     params_file = r.text(top["params_file"], None, nullable=True)
@@ -197,7 +200,9 @@ def _config(r: _Reader, top: _Section) -> Config:
         gcs=GcsConfig(sysid=r.integer(gcs["sysid"], 255, 1, 255),
                       enforce_sysid=r.boolean(gcs["enforce_sysid"], False)),
         mission=_mission(r, r.section(top["mission"], _MISSION_KEYS)),
-        ftp=FtpConfig(root=_ftp_root(r, ftp["root"])),
+        ftp=FtpConfig(root=_ftp_root(r, ftp["root"]),
+                      max_file_bytes=r.integer(ftp["max_file_bytes"], DEFAULT_FTP_MAX_FILE_BYTES, 1,
+                                               MAX_FTP_FILE_BYTES)),
         signing=_signing(r, r.section(top["signing"], ("key", "require"))),
         channels=_channels(r, top["channels"]),
         log=LogConfig(level=r.choice(log["level"], "info", LOG_LEVELS),

@@ -155,6 +155,11 @@ def test_mission_limits_are_read():
     assert config.mission == MissionConfig(max_items=1000, max_fence=20, max_rally=5, retry_ms=250)
 
 
+def test_ftp_write_limit_defaults_to_64_mib_and_is_read():
+    assert default_config().ftp.max_file_bytes == 64 * 1024 * 1024
+    assert parse("ftp: {max_file_bytes: 1000}\n").ftp.max_file_bytes == 1000
+
+
 def test_relative_paths_are_kept_as_written():
     config = parse("state_dir: ./run/state\nparams_file: ../params/copter.parm\n")
     assert config.state_dir == Path("run/state")
@@ -231,6 +236,10 @@ BAD_CONFIGS = [
                                 "got '/srv/ftp'"),
     ("ftp: {root: a/../../b}\n", "gcsd.yaml:1: ftp.root: expected a path relative to state_dir without '..', "
                                  "got 'a/../../b'"),
+    ("ftp: {max_file_bytes: 0}\n", "gcsd.yaml:1: ftp.max_file_bytes: expected an integer 1..4294967295, got 0"),
+    ("ftp: {max_file_bytes: 4294967296}\n",
+     "gcsd.yaml:1: ftp.max_file_bytes: expected an integer 1..4294967295, got 4294967296"),
+    ("ftp: {max_file_bytes: 64M}\n", "gcsd.yaml:1: ftp.max_file_bytes: expected an integer 1..4294967295, got '64M'"),
     ("signing: {key: abcd}\n",
      "gcsd.yaml:1: signing.key: expected 64 hex characters or null, got 4 characters"),
     (f"signing: {{key: {'g' * 64}}}\n",
