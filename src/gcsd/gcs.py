@@ -11,8 +11,10 @@ broadcasts and never processed.
 from __future__ import annotations
 
 import asyncio
+from pathlib import Path
 
 import structlog
+from pymavlink.dialects.v20 import ardupilotmega as M
 
 from .channel import Channel
 from .clock import Clock
@@ -20,6 +22,9 @@ from .codec import Frame
 from .config import Config
 from .node import VehicleNode
 from .router import MSG_ID_HEARTBEAT, MSG_ID_RADIO, MSG_ID_RADIO_STATUS, Router
+from .services.signing import SigningService
+from .signing import SAVE_INTERVAL_S, SigningManager, SigningStore
+from .services.ftp import FtpService
 from .transport import run_channel
 from .vehicles import vehicle_type
 
@@ -43,6 +48,20 @@ class GCS:
         self.nodes = [
             VehicleNode(i, config, vtype, self.clock, self.channels, self.wake) for i in range(config.vehicle.count)
         ]
+        for node in self.nodes:  # FTP root: ftp.root under the vehicle's state directory
+            node.add_service(FtpService(node, node.state_dir / config.ftp.root, config.ftp.max_file_bytes))
+        self.signing_manager = SigningManager(
+            config.signing.key, config.signing.require, SigningStore(Path(config.state_dir) / "signing.key"),
+            self.clock.wall(),
+        )
+        if self.signing_manager.load_error:
+            log.error("signing_state_unreadable", error=self.signing_manager.load_error)
+        self.signing = self.signing_manager.signing
+        for ch in self.channels:
+            ch.signing = self.signing
+            ch.wall = self.clock.wall
+        for node in self.nodes:
+            node.add_service(SigningService(node, self.signing_manager))
         self._by_sysid = {n.sysid: n for n in self.nodes}
         self.router = Router({(n.sysid, n.compid) for n in self.nodes}, [ch.policy for ch in self.channels])
         self.bad_crc_forwarded = 0
@@ -59,6 +78,12 @@ class GCS:
     def on_frame(self, channel: Channel, frame: Frame) -> None:
         now = self.clock.now()
         msgid = frame.msgid
+        signing = self.signing
+        if signing.checks_needed:
+            reason = signing.check(frame.raw, msgid, frame.sysid, frame.compid, channel.unsigned_ok)
+            if reason is not None:
+                self._reject(channel, frame, reason, now)
+                return
         if msgid != MSG_ID_RADIO_STATUS and msgid != MSG_ID_RADIO and channel.index not in self.active:
             channel.active = True
             self.active.add(channel.index)
@@ -83,6 +108,16 @@ class GCS:
         if target_component > 0:
             return [n for n in self.nodes if n.compid == target_component] or self.nodes
         return self.nodes
+
+    def _reject(self, channel: Channel, frame: Frame, reason: str, now: float) -> None:
+        """A frame that failed the signing checks: counted, never learned, forwarded or handled."""
+        channel.stats.signature_rejects += 1
+        channel.signature_reject_reasons[reason] = channel.signature_reject_reasons.get(reason, 0) + 1
+        if self.signing_manager.should_warn(channel.index, now):
+            log.warning("signature_rejected", channel=channel.name, sysid=frame.sysid, compid=frame.compid,
+                        msg=frame.name, reason=reason)
+            for node in self.nodes:
+                node.send_text(M.MAV_SEVERITY_WARNING, f"Signing: rejected packet ({reason})", channels={channel.index})
 
     def on_peer_joined(self, channel: Channel) -> None:
         """A new ground station hears from us at once instead of at the next 1 Hz slot."""
@@ -121,11 +156,22 @@ class GCS:
                 for ch in self.channels
             ]
             tasks.append(tg.create_task(self._log_stats(), name="stats"))
+            tasks.append(tg.create_task(self._save_signing_timestamp(), name="signing"))
             await stop.wait()
             for task in tasks:
                 task.cancel()
         for node in self.nodes:
             node.close()
+        if self.signing.key is not None:
+            self.signing_manager.save(clean=True)
+
+    async def _save_signing_timestamp(self) -> None:
+        while True:
+            await asyncio.sleep(SAVE_INTERVAL_S)
+            try:
+                self.signing_manager.save_if_changed()
+            except OSError as exc:
+                log.error("signing_save_failed", error=str(exc))
 
     async def _log_stats(self) -> None:
         while True:

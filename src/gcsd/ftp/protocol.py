@@ -69,6 +69,12 @@ class Payload:
     offset: int = 0
     data: bytes = b""
 
+    def __repr__(self) -> str:
+        op = Op(self.opcode).name if self.opcode in Op._value2member_map_ else str(self.opcode)
+        req = Op(self.req_opcode).name if self.req_opcode in Op._value2member_map_ else str(self.req_opcode)
+        return (f"Payload(seq={self.seq}, session={self.session}, {op}, size={self.size}, req={req}, "
+                f"bc={self.burst_complete}, offset={self.offset}, data={self.data[:self.size]!r})")
+
     @classmethod
     def unpack(cls, raw: bytes | bytearray | list[int]) -> "Payload":
         raw = bytes(raw)

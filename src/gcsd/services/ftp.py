@@ -1,0 +1,150 @@
+"""MAVLink FTP service: the thin adapter between the node and the pure FtpServer (gcsd.ftp).
+
+- FILE_TRANSFER_PROTOCOL requests go to `FtpServer.handle`; its replies are sent at once on
+  the requesting link, targeted at the requester (target_network 0), while the link's byte
+  budget has room; what does not fit waits in a per-link outbox of OUTBOX_MAX replies (older
+  ones are dropped and counted beyond that: the client retries).
+- Bursts and long CRCs go out in the node's send pass (`pending`): at most PACKETS_PER_PASS
+  per pass (then the pass yields to the event loop), and on a link with a configured bandwidth
+  no more than a third of it, as ArduPilot paces bursts (3 x packet bytes / bandwidth between
+  packets), so a radio link keeps room for telemetry and for the client's requests.
+- Any FTP reply slows the link's streams x4 for SLOW_S (1 s), as ArduPilot does.
+- The FTP root is `ftp.root` under the vehicle's state directory; writes stop at
+  `ftp.max_file_bytes`. Virtual files: `@PARAM/param.pck` through the node's parameter store
+  and parameter service.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from pathlib import Path
+
+import structlog
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from ..channel import MAX_FRAME_BYTES
+from ..ftp.fs import ConfinedFs
+from ..ftp.server import FtpServer, Outgoing
+from ..ftp.virtual import VirtualFiles
+from . import Incoming, Service
+
+log = structlog.get_logger("gcsd.ftp")
+
+OUTBOX_MAX = 64
+PACKETS_PER_PASS = 32
+SLOW_S = 1.0
+BURST_BANDWIDTH_SHARE = 3  # a burst uses at most 1/3 of a link's configured bandwidth
+
+
+class NodeParams:
+    """The node's parameter store and service, as the FTP virtual files want them."""
+
+    def __init__(self, node) -> None:
+        self.node = node
+
+    def entries(self):
+        return self.node.params.entries()
+
+    def count(self) -> int:
+        return len(self.node.params)
+
+    def set_from_file(self, name: str, value: float) -> bool:
+        return self.node.param_service.set_from_file(name, value, save=False)
+
+    def commit(self) -> None:
+        try:
+            self.node.param_service.save()
+        except OSError as exc:
+            log.error("params_save_failed", error=str(exc))
+
+    def downloaded(self) -> None:
+        self.node.send_banner()
+
+
+class FtpService(Service):
+    capabilities = M.MAV_PROTOCOL_CAPABILITY_FTP
+
+    def __init__(self, node, root: Path, max_file_bytes: int, missions=None) -> None:
+        self.node = node
+        params = NodeParams(node) if getattr(node, "params", None) is not None else None
+        self.server = FtpServer(ConfinedFs(root, max_file_bytes), VirtualFiles(params, missions))
+        self._outbox: dict[int, deque[Outgoing]] = {}
+        self._slow_until_s: dict[int, float] = {}
+        self._next_burst_s: dict[int, float] = {}
+        self.replies_dropped = 0
+        log.info("ftp_root_opened", root=str(self.server.fs.root), max_file_bytes=max_file_bytes)
+
+    def handle_FILE_TRANSFER_PROTOCOL(self, inc: Incoming) -> None:
+        channel = inc.channel
+        replies = self.server.handle(bytes(inc.msg.payload), inc.sender, channel.index, inc.now)
+        box = self._outbox.setdefault(channel.index, deque())
+        for reply in replies:
+            if len(box) >= OUTBOX_MAX:
+                box.popleft()
+                self.replies_dropped += 1
+            box.append(reply)
+        self._flush(channel, inc.now, lambda msg: self.node.reply(channel, msg))
+        if box or self.server.has_work(channel.index):
+            self.node.wake(channel)
+
+    def pending(self, channel, now: float, send) -> float | None:
+        """The send-pass hook: outbox, then bursts and CRCs; returns this service's next deadline."""
+        index = channel.index
+        self.server.expire(now)
+        deadline = None
+        if not self._flush(channel, now, send):
+            deadline = now + max(channel.budget_wait_s(MAX_FRAME_BYTES), 0.001)
+        elif self.server.has_work(index):
+            deadline = self._pump(channel, now, send)
+        until = self._slow_until_s.get(index)
+        if until is not None:
+            if now >= until:
+                del self._slow_until_s[index]
+                self.node.link(channel).set_slow("ftp", False)
+            else:
+                deadline = until if deadline is None else min(deadline, until)
+        expiry = self.server.next_deadline(now)
+        if expiry is not None and expiry > now:
+            deadline = expiry if deadline is None else min(deadline, expiry)
+        return deadline
+
+    # --- sending ---------------------------------------------------------------------------
+    def _flush(self, channel, now: float, send) -> bool:
+        """Send queued replies while there is room; True when the outbox is empty."""
+        box = self._outbox.get(channel.index)
+        while box:
+            if not channel.has_room(MAX_FRAME_BYTES) or not self._send(channel, box[0], now, send):
+                return False
+            box.popleft()
+        return True
+
+    def _pump(self, channel, now: float, send) -> float:
+        index = channel.index
+        bandwidth = channel.config.bandwidth
+        sent = 0
+        while sent < PACKETS_PER_PASS:
+            if bandwidth and self._next_burst_s.get(index, 0.0) > now:
+                return self._next_burst_s[index]
+            if not channel.has_room(MAX_FRAME_BYTES):
+                return now + max(channel.budget_wait_s(MAX_FRAME_BYTES), 0.001)
+            packets = self.server.pump(index, now, 1)
+            if not packets:
+                return now if self.server.has_work(index) else None
+            if not self._send(channel, packets[0], now, send):
+                box = self._outbox.setdefault(index, deque())
+                box.append(packets[0])  # keep it: a burst packet is not re-requested unless lost
+                return now + 0.001
+            sent += 1
+            if bandwidth:
+                start = max(self._next_burst_s.get(index, 0.0), now)
+                self._next_burst_s[index] = start + BURST_BANDWIDTH_SHARE * len(packets[0].payload) / bandwidth
+        return now
+
+    def _send(self, channel, out: Outgoing, now: float, send) -> bool:
+        msg = M.MAVLink_file_transfer_protocol_message(0, out.target[0], out.target[1], out.payload)
+        if not send(msg):
+            return False
+        if channel.index not in self._slow_until_s:
+            self.node.link(channel).set_slow("ftp", True)
+        self._slow_until_s[channel.index] = now + SLOW_S
+        return True
