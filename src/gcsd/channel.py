@@ -104,6 +104,10 @@ class Channel:
         self.on_peer_joined: Callable[[Channel], None] = lambda channel: None
         self._encoders: dict[tuple[int, int], Encoder] = {}
         self._keep_bad_crc = "forward_bad_crc" in config.options
+        self.unsigned_ok = "unsigned_ok" in config.options
+        self.signing = None  # the process's Signing, set by the GCS; outgoing frames are signed when it has a key
+        self.wall: Callable[[], float] = time.time
+        self.signature_reject_reasons: dict[str, int] = {}
         self._retired = ParseStats()  # counters of peers that are gone
 
     # --- peers -----------------------------------------------------------------------------
@@ -186,7 +190,11 @@ class Channel:
 
     def send_message(self, msg: MAVLink_message, sysid: int, compid: int) -> bool:
         """Encode a message from one of our components for this link and write it."""
-        raw = self.encoder(sysid, compid).encode(msg, self.mavlink1)
+        signing = self.signing
+        sign = None
+        if signing is not None and signing.key is not None and not self.mavlink1:
+            sign = (signing.key, self.index & 0xFF, signing.next_timestamp(self.wall()))
+        raw = self.encoder(sysid, compid).encode(msg, self.mavlink1, sign)
         if raw is None:
             return True  # not representable on this link version: nothing to send
         return self.write(raw)
@@ -203,4 +211,6 @@ class Channel:
         out["unknown_ids"] = sum(s.unknown_ids for s in parse)
         out["seq_gaps"] = sum(s.seq_gaps for s in parse)
         out["peers"] = len(self.peers)
+        for reason, n in self.signature_reject_reasons.items():
+            out[f"signature_rejects_{reason}"] = n
         return out

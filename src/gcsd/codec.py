@@ -246,14 +246,17 @@ class Encoder:
     def __init__(self, sysid: int, compid: int) -> None:
         self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
 
-    @property
-    def signing(self):
-        return self._mav.signing
-
-    def encode(self, msg: MAVLink_message, mavlink1: bool = False) -> bytes | None:
+    def encode(self, msg: MAVLink_message, mavlink1: bool = False, sign: tuple[bytes, int, int] | None = None) -> bytes | None:
+        """Pack for this link; `sign` = (key, link_id, timestamp) signs a MAVLink2 frame."""
         if mavlink1 and msg.get_msgId() > 255:
             return None
         mav = self._mav
+        signing = mav.signing
+        if sign is not None and not mavlink1:
+            signing.secret_key, signing.link_id, signing.timestamp = sign
+            signing.sign_outgoing = True
+        else:
+            signing.sign_outgoing = False
         raw = msg.pack(mav, force_mavlink1=mavlink1)
         mav.seq = (mav.seq + 1) & 0xFF
         return raw

@@ -1,0 +1,195 @@
+"""MAVLink2 message signing (REFERENCE.md section 9): the pure core. Wall time comes in as `wall_s`.
+
+Timestamps are 48-bit, in 10 us units since 2015-01-01. Our local timestamp never goes back:
+it is at least the wall clock, it rises with every packet we sign, and with every valid packet
+we accept.
+
+Incoming, per frame (`check`):
+- Signed frame and a key: the signature (first 6 bytes of SHA-256(key + frame without its
+  signature)) must match. Streams are keyed by (sysid, compid, link id). A new stream is
+  accepted only if its timestamp is at most 60 s behind our local timestamp; a known stream's
+  timestamp must strictly increase. At most MAX_STREAMS streams are tracked; when full, the
+  stream seen least recently is forgotten (ArduPilot refuses new streams instead, which locks
+  out a ground station that reconnects with a new link id).
+- Unsigned frame (MAVLink1 included): RADIO_STATUS and RADIO are always accepted; on a channel
+  marked unsigned_ok it is accepted; otherwise it is refused when `require` is set, and accepted
+  when it is not (SPEC.md: `require: false` is the permissive default).
+- Signed frame but no key: refused when `require` is set (it cannot be checked), else accepted.
+
+Outgoing: `next_timestamp()` for each packet signed on a channel whose output is MAVLink2.
+
+Restart safety: the timestamp is saved (see SigningStore) every SAVE_INTERVAL_S and at a clean
+stop. At start the local timestamp becomes the saved one + 60 s, plus SAVE_INTERVAL_S when the
+last stop was not clean, so that no packet captured before the restart is inside the new-stream
+window: a replay across a restart is always refused.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+from dataclasses import dataclass
+from pathlib import Path
+
+from .atomic import write_atomic
+
+EPOCH_2015_S = 1420070400
+UNITS_PER_S = 100_000
+WINDOW_UNITS = 60 * UNITS_PER_S
+MAX_STREAMS = 64
+SAVE_INTERVAL_S = 10.0
+SIG_LEN = 13  # link id 1 + timestamp 6 + signature 6
+MSG_ID_RADIO_STATUS = 109
+MSG_ID_RADIO = 166
+
+# rejection reasons, also the counter names
+UNSIGNED = "unsigned"
+BAD_SIGNATURE = "bad_signature"
+REPLAY = "replay"
+STALE = "stale"
+NO_KEY = "no_key"
+
+
+def wall_to_units(wall_s: float) -> int:
+    return max(0, int((wall_s - EPOCH_2015_S) * UNITS_PER_S))
+
+
+def signature_of(key: bytes, frame_without_signature: bytes) -> bytes:
+    return hashlib.sha256(key + frame_without_signature).digest()[:6]
+
+
+class Signing:
+    def __init__(self, key: bytes | None = None, timestamp: int = 0, require: bool = False) -> None:
+        self.key = key
+        self.timestamp = timestamp
+        self.require = require
+        self._streams: dict[tuple[int, int, int], int] = {}
+
+    @property
+    def checks_needed(self) -> bool:
+        """False when every frame is accepted untouched (no key, not required): the fast path."""
+        return self.key is not None or self.require
+
+    def set_key(self, key: bytes | None, timestamp: int = 0) -> None:
+        """A new key (None or 32 zero bytes: signing off). Known streams are forgotten."""
+        self.key = None if key is None or key == bytes(32) else bytes(key)
+        self.timestamp = max(self.timestamp, timestamp)
+        self._streams.clear()
+
+    def next_timestamp(self, wall_s: float) -> int:
+        self.timestamp = max(self.timestamp + 1, wall_to_units(wall_s))
+        return self.timestamp
+
+    def check(self, raw: bytes, msgid: int, sysid: int, compid: int, unsigned_ok: bool) -> str | None:
+        """None if the frame is accepted, else the reason it is refused."""
+        signed = raw[0] == 0xFD and raw[2] & 0x01
+        if not signed:
+            if msgid == MSG_ID_RADIO_STATUS or msgid == MSG_ID_RADIO or unsigned_ok:
+                return None
+            return UNSIGNED if self.require else None
+        key = self.key
+        if key is None:
+            return NO_KEY if self.require and not unsigned_ok else None
+        if not hmac.compare_digest(signature_of(key, raw[:-6]), raw[-6:]):
+            return BAD_SIGNATURE
+        link_id = raw[-SIG_LEN]
+        ts = int.from_bytes(raw[-12:-6], "little")
+        stream = (sysid, compid, link_id)
+        last = self._streams.get(stream)
+        if last is None:
+            if ts + WINDOW_UNITS < self.timestamp:
+                return STALE
+            if len(self._streams) >= MAX_STREAMS:
+                oldest = min(self._streams, key=self._streams.get)
+                del self._streams[oldest]
+        elif ts <= last:
+            return REPLAY
+        self._streams[stream] = ts
+        if ts > self.timestamp:
+            self.timestamp = ts
+        return None
+
+
+@dataclass(frozen=True)
+class SavedSigning:
+    key: bytes | None
+    timestamp: int
+    clean: bool
+
+
+class SigningStore:
+    """`signing.key` in the state directory, mode 0600: the key (hex), the timestamp, and whether
+    the daemon stopped cleanly. The key is never logged."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def load(self) -> SavedSigning | None:
+        try:
+            text = self.path.read_text()
+        except FileNotFoundError:
+            return None
+        fields = dict(line.split(None, 1) for line in text.splitlines() if line.strip() and " " in line.strip())
+        key_hex = fields.get("key", "none").strip()
+        key = None if key_hex == "none" else bytes.fromhex(key_hex)
+        if key is not None and len(key) != 32:
+            raise ValueError("key is not 32 bytes")
+        return SavedSigning(key, int(fields.get("timestamp", "0")), fields.get("clean", "0").strip() == "1")
+
+    def save(self, key: bytes | None, timestamp: int, clean: bool) -> None:
+        text = f"key {key.hex() if key else 'none'}\ntimestamp {timestamp}\nclean {int(clean)}\n"
+        write_atomic(self.path, text, mode=0o600)
+
+    @staticmethod
+    def restart_timestamp(saved: SavedSigning) -> int:
+        # +1: a packet whose timestamp equals the saved one (it set it) is outside the window too
+        return saved.timestamp + WINDOW_UNITS + 1 + (0 if saved.clean else int(SAVE_INTERVAL_S * UNITS_PER_S))
+
+
+class SigningManager:
+    """The process's signing: the Signing state, its persistence and the per-channel warnings.
+
+    Key at start: `signing.key` from the configuration if set, else the saved one. A key set by
+    SETUP_SIGNING is saved and used until the next start (where a configured key wins again).
+    """
+
+    WARN_INTERVAL_S = 10.0
+
+    def __init__(self, config_key: bytes | None, require: bool, store: SigningStore | None, wall_s: float) -> None:
+        self.store = store
+        saved = None
+        if store is not None:
+            try:
+                saved = store.load()
+            except (OSError, ValueError) as exc:
+                self.load_error = str(exc)
+            else:
+                self.load_error = None
+        timestamp = max(wall_to_units(wall_s), SigningStore.restart_timestamp(saved) if saved else 0)
+        key = config_key if config_key is not None else (saved.key if saved else None)
+        self.signing = Signing(key, timestamp, require)
+        self.signing.set_key(key)  # all-zero key: off
+        self._saved_timestamp = -1
+        self._last_warning_s: dict[int, float] = {}
+
+    def apply_key(self, key: bytes, initial_timestamp: int) -> None:
+        self.signing.set_key(key, initial_timestamp)
+        self.save(clean=False)
+
+    def save(self, clean: bool = False) -> None:
+        if self.store is None:
+            return
+        self.store.save(self.signing.key, self.signing.timestamp, clean)
+        self._saved_timestamp = self.signing.timestamp
+
+    def save_if_changed(self) -> None:
+        if self.signing.key is not None and self.signing.timestamp != self._saved_timestamp:
+            self.save(clean=False)
+
+    def should_warn(self, channel_index: int, now: float) -> bool:
+        """At most one warning per WARN_INTERVAL_S per channel."""
+        last = self._last_warning_s.get(channel_index)
+        if last is not None and now - last < self.WARN_INTERVAL_S:
+            return False
+        self._last_warning_s[channel_index] = now
+        return True

@@ -1,0 +1,188 @@
+"""MAVLink2 signing against the real daemon, with pymavlink's signing as the client."""
+
+from __future__ import annotations
+
+import hashlib
+import time
+
+from gcsd.signing import EPOCH_2015_S, UNITS_PER_S
+
+from .helpers import M, Client, is_ack, pump, udp_channel, udp_url, wait_for
+
+KEY = hashlib.sha256(b"correct horse battery staple").digest()
+OTHER_KEY = hashlib.sha256(b"wrong").digest()
+
+
+def now_units() -> int:
+    return int((time.time() - EPOCH_2015_S) * UNITS_PER_S)
+
+
+def sign(c: Client, key: bytes, link_id: int = 0, timestamp: int | None = None) -> None:
+    c.mav.signing.secret_key = key
+    c.mav.signing.link_id = link_id
+    c.mav.signing.timestamp = timestamp if timestamp is not None else now_units()
+    c.mav.signing.sign_outgoing = True
+
+
+def arm_ack(c: Client, timeout: float = 1.5):
+    mark = c.mark()
+    c.command_long(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+    return wait_for(c, is_ack(M.MAV_CMD_REQUEST_MESSAGE), timeout, since=mark)
+
+
+def signed_daemon(daemon, tmp_path, **channel):
+    return daemon({
+        "state_dir": str(tmp_path / "st"),
+        "signing": {"key": KEY.hex(), "require": True},
+        "channels": [udp_channel("gcs", **channel), udp_channel("open", options=["unsigned_ok"])],
+    })
+
+
+def test_signed_client_with_the_key_is_answered_and_replies_are_signed(daemon, client, tmp_path):
+    d = signed_daemon(daemon, tmp_path)
+    c = client(udp_url(d.port("gcs")))
+    sign(c, KEY)
+    assert arm_ack(c) is not None
+    reply = [r for r in c.received if r.src == (1, 1)][-1]
+    assert reply.raw[2] & 0x01, "replies on a signed channel are signed"
+    assert hashlib.sha256(KEY + reply.raw[:-6]).digest()[:6] == reply.raw[-6:]
+
+
+def test_client_without_the_key_gets_nothing_accepted(daemon, client, tmp_path):
+    d = signed_daemon(daemon, tmp_path)
+    unsigned = client(udp_url(d.port("gcs")), 250, 190)
+    assert arm_ack(unsigned) is None
+    wrong = client(udp_url(d.port("gcs")), 251, 190)
+    sign(wrong, OTHER_KEY)
+    assert arm_ack(wrong) is None
+    stats = d.stats("gcs")
+    assert stats["signature_rejects_unsigned"] >= 1 and stats["signature_rejects_bad_signature"] >= 1
+
+
+def test_rejections_are_explained_by_at_most_one_statustext_per_10_s(daemon, client, tmp_path):
+    d = signed_daemon(daemon, tmp_path)
+    c = client(udp_url(d.port("gcs")))
+    for _ in range(5):
+        c.heartbeat()
+    pump([c], 1.0)
+    texts = [r for r in c.received if r.type == "STATUSTEXT" and "Signing" in r.msg.text]
+    assert len(texts) == 1 and "unsigned" in texts[0].msg.text
+
+
+def test_mavlink1_is_refused_on_a_channel_that_requires_signing(daemon, client, tmp_path):
+    d = signed_daemon(daemon, tmp_path)
+    c = client(udp_url(d.port("gcs")), version=1)
+    assert arm_ack(c) is None
+    assert d.stats("gcs")["signature_rejects_unsigned"] >= 1
+
+
+def test_unsigned_ok_channel_accepts_unsigned_clients(daemon, client, tmp_path):
+    d = signed_daemon(daemon, tmp_path)
+    assert arm_ack(client(udp_url(d.port("open")))) is not None
+
+
+def test_replayed_packet_is_dropped(daemon, client, tmp_path):
+    d = signed_daemon(daemon, tmp_path)
+    c = client(udp_url(d.port("gcs")))
+    sign(c, KEY)
+    mark = c.mark()
+    raw = c.command_long(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+    assert wait_for(c, is_ack(M.MAV_CMD_REQUEST_MESSAGE), since=mark)
+    mark = c.mark()
+    c.write(raw)
+    assert wait_for(c, is_ack(M.MAV_CMD_REQUEST_MESSAGE), timeout=1.0, since=mark) is None
+    assert d.stats("gcs")["signature_rejects_replay"] == 1
+
+
+def test_new_stream_two_minutes_old_is_dropped(daemon, client, tmp_path):
+    d = signed_daemon(daemon, tmp_path)
+    c = client(udp_url(d.port("gcs")))
+    sign(c, KEY, timestamp=now_units() - 120 * UNITS_PER_S)
+    assert arm_ack(c) is None
+    assert d.stats("gcs")["signature_rejects_stale"] >= 1
+
+
+def test_packets_captured_before_a_restart_are_dropped_after_it(daemon, client, tmp_path):
+    d = signed_daemon(daemon, tmp_path)
+    c = client(udp_url(d.port("gcs")))
+    sign(c, KEY)
+    mark = c.mark()
+    captured = c.command_long(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+    assert wait_for(c, is_ack(M.MAV_CMD_REQUEST_MESSAGE), since=mark)
+    d.stop()
+    d2 = signed_daemon(daemon, tmp_path)
+    attacker = client(udp_url(d2.port("gcs")))
+    mark = attacker.mark()
+    attacker.write(captured)
+    assert wait_for(attacker, is_ack(M.MAV_CMD_REQUEST_MESSAGE), timeout=1.0, since=mark) is None
+    assert d2.stats("gcs")["signature_rejects_stale"] == 1
+
+
+def setup_signing(c: Client, key: bytes) -> None:
+    c.send(M.MAVLink_setup_signing_message(1, 1, key, now_units()))
+
+
+def test_setup_signing_on_an_unsigned_ok_channel_enables_signing_everywhere(daemon, client, tmp_path):
+    d = daemon({
+        "state_dir": str(tmp_path / "st"), "signing": {"require": True},
+        "channels": [udp_channel("gcs"), udp_channel("open", options=["unsigned_ok"])],
+    })
+    gcs = client(udp_url(d.port("gcs")))
+    assert arm_ack(gcs) is None, "required and no key: nothing is accepted"
+    trusted = client(udp_url(d.port("open")), 254, 190)
+    mark = trusted.mark()
+    setup_signing(trusted, KEY)
+    assert wait_for(trusted, lambda r: r.type == "STATUSTEXT" and "Signing enabled" in r.msg.text, since=mark)
+    sign(gcs, KEY)
+    assert arm_ack(gcs) is not None
+    assert (tmp_path / "st" / "signing.key").stat().st_mode & 0o777 == 0o600
+    assert KEY.hex() not in (tmp_path / "st").joinpath("mav.parm").read_text()
+
+
+def test_setup_signing_on_an_unsigned_channel_changes_nothing(daemon, client, tmp_path):
+    d = daemon({"state_dir": str(tmp_path / "st"), "channels": [udp_channel("gcs")]})
+    c = client(udp_url(d.port("gcs")))
+    mark = c.mark()
+    setup_signing(c, KEY)
+    assert wait_for(c, lambda r: r.type == "STATUSTEXT" and "signed or unsigned_ok" in r.msg.text, since=mark)
+    ack = arm_ack(c)
+    assert ack is not None and not ack.raw[2] & 0x01, "still unsigned: no key was installed"
+    assert not (tmp_path / "st" / "signing.key").exists()
+
+
+def test_setup_signing_is_refused_while_armed_and_the_sender_is_told(daemon, client, tmp_path):
+    d = daemon({"state_dir": str(tmp_path / "st"), "channels": [udp_channel("open", options=["unsigned_ok"])]})
+    c = client(udp_url(d.port("open")))
+    mark = c.mark()
+    c.command_long(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, 21196)
+    assert wait_for(c, is_ack(M.MAV_CMD_COMPONENT_ARM_DISARM), since=mark).msg.result == M.MAV_RESULT_ACCEPTED
+    mark = c.mark()
+    setup_signing(c, KEY)
+    assert wait_for(c, lambda r: r.type == "STATUSTEXT" and "armed" in r.msg.text, since=mark)
+    assert not (tmp_path / "st" / "signing.key").exists()
+
+
+def test_radio_status_is_accepted_unsigned(daemon, client, tmp_path):
+    d = signed_daemon(daemon, tmp_path)
+    c = client(udp_url(d.port("gcs")), 51, 68)
+    c.send(M.MAVLink_radio_status_message(200, 200, 40, 0, 0, 0, 0))
+    pump([c], 0.5)
+    assert d.stats("gcs").get("signature_rejects_unsigned", 0) == 0
+
+
+def test_forwarded_frames_keep_their_signature(daemon, client, tmp_path):
+    d = daemon({
+        "state_dir": str(tmp_path / "st"), "signing": {"key": KEY.hex()},
+        "channels": [udp_channel("a"), udp_channel("b")],
+    })
+    a = client(udp_url(d.port("a")), 255, 190)
+    b = client(udp_url(d.port("b")), 77, 1)
+    sign(a, KEY, link_id=3)
+    sign(b, KEY, link_id=4)
+    b.heartbeat(M.MAV_TYPE_ONBOARD_CONTROLLER)
+    a.heartbeat()
+    pump([a, b], 0.5)
+    mark = b.mark()
+    raw = a.command_long(M.MAV_CMD_REQUEST_MESSAGE, 1, target=(77, 1))
+    got = wait_for(b, lambda r: r.raw == raw, since=mark)
+    assert got is not None and got.raw[-13] == 3, "byte-exact, link id and signature of the sender"
