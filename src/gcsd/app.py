@@ -13,6 +13,7 @@ import structlog
 
 from .config import Config
 from .gcs import GCS
+from .notify import Notifier
 
 log = structlog.get_logger("gcsd")
 
@@ -40,7 +41,8 @@ async def run_daemon(config: Config) -> int:
             "daemon_started", vehicle=config.vehicle.type, sysid=config.vehicle.sysid,
             compid=config.vehicle.compid, count=config.vehicle.count, channels=len(gcs.channels),
         )
-        await gcs.run(stop)
+        notifier = Notifier()
+        await _run_with_notify(gcs, stop, notifier)
     except Exception:
         log.exception("daemon_failed")
         return 1
@@ -49,3 +51,23 @@ async def run_daemon(config: Config) -> int:
             loop.remove_signal_handler(signum)
     log.info("daemon_stopped")
     return 0
+
+
+async def _run_with_notify(gcs: GCS, stop: asyncio.Event, notifier: Notifier) -> None:
+    """Run the GCS; tell systemd when every channel is open, and ping its watchdog from the loop."""
+
+    async def tell_systemd() -> None:
+        await gcs.all_open.wait()
+        notifier.ready(f"{len(gcs.channels)} channels open")
+        log.info("daemon_ready", channels=len(gcs.channels), notify=notifier.enabled)
+        interval = notifier.watchdog_interval_s
+        while interval:
+            notifier.watchdog()
+            await asyncio.sleep(interval)
+
+    helper = asyncio.create_task(tell_systemd())
+    try:
+        await gcs.run(stop)
+    finally:
+        helper.cancel()
+        notifier.stopping()

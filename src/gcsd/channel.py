@@ -108,6 +108,7 @@ class Channel:
         self.signing = None  # the process's Signing, set by the GCS; outgoing frames are signed when it has a key
         self.wall: Callable[[], float] = time.time
         self.signature_reject_reasons: dict[str, int] = {}
+        self.tlog = None  # a TlogWriter shared by all channels, when log.tlog is set
         self._retired = ParseStats()  # counters of peers that are gone
 
     # --- peers -----------------------------------------------------------------------------
@@ -177,6 +178,8 @@ class Channel:
         if self.budget is not None and not self.budget.try_take(len(raw), self.clock()):
             self.stats.drops += 1
             return False
+        if self.tlog is not None:
+            self.tlog.record(raw, self.wall())
         sent = False
         for peer in list(self.peers.values()):
             if peer.write(raw):

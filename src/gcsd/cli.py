@@ -44,6 +44,9 @@ def _parser() -> argparse.ArgumentParser:
                      help="configuration file (default: the built-in default, as config/gcsd.yaml)")
     check = commands.add_parser("check-config", help="validate a configuration file and exit")
     check.add_argument("file", metavar="FILE")
+    status = commands.add_parser("status", help="show a running daemon's channels, routes and counters")
+    status.add_argument("-c", "--config", metavar="FILE", help="the running daemon's configuration (for state_dir)")
+    status.add_argument("--json", action="store_true", help="print the raw JSON")
     return parser
 
 
@@ -83,4 +86,25 @@ def _print_problems(error: ConfigError) -> None:
         print(problem, file=sys.stderr)
 
 
-_COMMANDS = {"run": _run, "check-config": _check_config}
+def _status(args: argparse.Namespace) -> int:
+    import json
+    from pathlib import Path
+
+    from gcsd import control
+
+    try:
+        config = default_config() if args.config is None else load_config(args.config)
+    except ConfigError as exc:
+        _print_problems(exc)
+        return EXIT_BAD_CONFIG
+    path = Path(config.state_dir) / control.SOCKET_NAME
+    try:
+        status = control.query(path)
+    except OSError as exc:
+        print(f"gcsd status: no daemon answers on {path}: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    print(json.dumps(status, indent=2) if args.json else control.format_status(status))
+    return EXIT_OK
+
+
+_COMMANDS = {"run": _run, "check-config": _check_config, "status": _status}

@@ -23,7 +23,9 @@ from .config import Config
 from .node import VehicleNode
 from .router import MSG_ID_HEARTBEAT, MSG_ID_RADIO, MSG_ID_RADIO_STATUS, Router
 from .services.signing import SigningService
+from . import __version__, control
 from .signing import SAVE_INTERVAL_S, SigningManager, SigningStore
+from .tlog import TlogWriter
 from .services.ftp import FtpService
 from .transport import run_channel
 from .vehicles import vehicle_type
@@ -62,6 +64,11 @@ class GCS:
             ch.wall = self.clock.wall
         for node in self.nodes:
             node.add_service(SigningService(node, self.signing_manager))
+        self.tlog = TlogWriter(config.log.tlog) if config.log.tlog else None
+        for ch in self.channels:
+            ch.tlog = self.tlog
+        self.started_s = self.clock.now()
+        self._rates: dict[str, tuple[float, float]] = {}
         self._by_sysid = {n.sysid: n for n in self.nodes}
         self.router = Router({(n.sysid, n.compid) for n in self.nodes}, [ch.policy for ch in self.channels])
         self.bad_crc_forwarded = 0
@@ -78,6 +85,8 @@ class GCS:
     def on_frame(self, channel: Channel, frame: Frame) -> None:
         now = self.clock.now()
         msgid = frame.msgid
+        if self.tlog is not None:
+            self.tlog.record(frame.raw, self.clock.wall())
         signing = self.signing
         if signing.checks_needed:
             reason = signing.check(frame.raw, msgid, frame.sysid, frame.compid, channel.unsigned_ok)
@@ -150,6 +159,22 @@ class GCS:
 
     async def run(self, stop: asyncio.Event) -> None:
         """Serve every channel until `stop` is set."""
+        sock_path = Path(self.config.state_dir) / control.SOCKET_NAME
+        try:
+            server = await control.serve(sock_path, self.status)
+        except OSError as exc:
+            server = None
+            log.error("control_socket_failed", path=str(sock_path), error=str(exc))
+        try:
+            await self._serve(stop)
+        finally:
+            if server is not None:
+                server.close()
+                sock_path.unlink(missing_ok=True)
+            if self.tlog is not None:
+                self.tlog.close()
+
+    async def _serve(self, stop: asyncio.Event) -> None:
         async with asyncio.TaskGroup() as tg:
             tasks = [
                 tg.create_task(run_channel(ch, self.send_pass, self._wakeups[ch.index], self._opened), name=ch.name)
@@ -174,11 +199,47 @@ class GCS:
                 log.error("signing_save_failed", error=str(exc))
 
     async def _log_stats(self) -> None:
+        last = {ch.name: ch.snapshot() for ch in self.channels}
         while True:
-            await asyncio.sleep(STATS_INTERVAL_S)
+            for _ in range(int(STATS_INTERVAL_S)):
+                await asyncio.sleep(1.0)
+                if self.tlog is not None:
+                    self.tlog.flush()
             for ch in self.channels:
-                log.info("channel_stats", channel=ch.name, **ch.snapshot())
+                snap = ch.snapshot()
+                prev = last[ch.name]
+                self._rates[ch.name] = (
+                    (snap["packets_in"] - prev["packets_in"]) / STATS_INTERVAL_S,
+                    (snap["packets_out"] - prev["packets_out"]) / STATS_INTERVAL_S,
+                )
+                last[ch.name] = snap
+                log.info("channel_stats", channel=ch.name, **snap)
             log.info("routes_learned", routes=len(self.router.table), not_learned=self.router.table.not_learned)
 
     def stats(self) -> dict[str, dict[str, int]]:
         return {ch.name: ch.snapshot() for ch in self.channels}
+
+    def status(self) -> dict:
+        """Everything `gcsd status` shows (see control.py)."""
+        now = self.clock.now()
+        channels = []
+        for ch in self.channels:
+            snap = ch.snapshot()
+            rate_in, rate_out = self._rates.get(ch.name, (0.0, 0.0))
+            address = f"{ch.local_address[0]}:{ch.local_address[1]}" if ch.local_address else (ch.config.device or "")
+            channels.append({
+                "name": ch.name, "type": ch.config.type, "address": address, "rate_in": rate_in,
+                "rate_out": rate_out, "signature_reject_reasons": dict(ch.signature_reject_reasons), **snap,
+            })
+        routes = [
+            {"sysid": r.sysid, "compid": r.compid, "channel": self.channels[r.channel].name,
+             "mavtype": r.mavtype, "age_s": now - r.last_seen_s}
+            for r in self.router.table
+        ]
+        vehicles = [
+            {"sysid": n.sysid, "compid": n.compid, "type": n.vehicle.name,
+             "mode": n.vehicle.modes.get(n.state.mode, str(n.state.mode)), "armed": n.state.armed}
+            for n in self.nodes
+        ]
+        return {"version": __version__, "uptime_s": now - self.started_s, "channels": channels,
+                "routes": routes, "vehicles": vehicles}
