@@ -1,0 +1,156 @@
+"""gcsd as a service: the systemd unit's own command under a notify socket, the watchdog, a clean
+stop, `gcsd status`, and tlog files that pymavlink reads."""
+
+from __future__ import annotations
+
+import os
+import shlex
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from pymavlink import mavutil
+
+from .helpers import M, pump, udp_url
+
+REPO = Path(__file__).resolve().parents[2]
+UNIT = REPO / "systemd" / "gcsd.service"
+
+
+def unit_exec_start() -> list[str]:
+    for line in UNIT.read_text().splitlines():
+        if line.startswith("ExecStart="):
+            return shlex.split(line.split("=", 1)[1])
+    raise AssertionError("no ExecStart in the unit")
+
+
+def write_config(tmp_path: Path, port: int = 0, extra: str = "") -> Path:
+    cfg = tmp_path / "gcsd.yaml"
+    cfg.write_text(
+        f"state_dir: {tmp_path / 'state'}\nlog: {{level: info, format: json{extra}}}\n"
+        f"channels:\n  - {{name: gcs, type: udp-server, address: '127.0.0.1:{port}'}}\n"
+    )
+    return cfg
+
+
+def env_with_venv(**extra: str) -> dict[str, str]:
+    env = dict(os.environ)
+    env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
+    env.update(extra)
+    return env
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def stop(proc: subprocess.Popen) -> int:
+    proc.send_signal(signal.SIGTERM)
+    try:
+        return proc.wait(5)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def test_unit_file_passes_systemd_analyze_verify():
+    tool = shutil.which("systemd-analyze")
+    if tool is None:
+        if os.environ.get("CI"):
+            pytest.fail("systemd-analyze is missing: .ci/run installs systemd")
+        pytest.skip("systemd-analyze is not installed")
+    result = subprocess.run([tool, "verify", str(UNIT)], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+
+
+def test_exec_start_under_systemd_notify_sends_ready_then_watchdog_pings_then_stopping(tmp_path):
+    notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    notify_path = tmp_path / "notify.sock"
+    notify.bind(str(notify_path))
+    notify.settimeout(0.2)
+    argv = unit_exec_start()
+    argv[argv.index("/etc/gcsd/gcsd.yaml")] = str(write_config(tmp_path))
+    proc = subprocess.Popen(
+        argv, env=env_with_venv(NOTIFY_SOCKET=str(notify_path), WATCHDOG_USEC="600000"),
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    messages: list[tuple[float, str]] = []
+    try:
+        start = time.monotonic()
+        while time.monotonic() - start < 3.0:
+            try:
+                messages.append((time.monotonic() - start, notify.recv(4096).decode()))
+            except socket.timeout:
+                pass
+        assert stop(proc) == 0
+        while True:
+            try:
+                messages.append((time.monotonic() - start, notify.recv(4096).decode()))
+            except socket.timeout:
+                break
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        notify.close()
+    texts = [m for _, m in messages]
+    assert texts[0].startswith("READY=1"), texts
+    assert messages[0][0] < 2.0, "ready within 2 s of start"
+    pings = [t for t, m in messages if m == "WATCHDOG=1"]
+    assert len(pings) >= 4, f"pings every 0.3 s for WatchdogSec=0.6 s, got {len(pings)}"
+    assert texts[-1] == "STOPPING=1"
+
+
+def test_status_command_shows_channels_routes_and_vehicle(tmp_path):
+    port = free_udp_port()
+    cfg = write_config(tmp_path, port)
+    proc = subprocess.Popen([sys.executable, "-m", "gcsd", "run", "-c", str(cfg)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 5
+        while not (tmp_path / "state" / "gcsd.sock").exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        gcs = mavutil.mavlink_connection(udp_url(port), source_system=255, source_component=190)
+        gcs.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        assert gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=3) is not None
+        gcs.close()
+        out = subprocess.run([sys.executable, "-m", "gcsd", "status", "-c", str(cfg)],
+                             capture_output=True, text=True, timeout=10)
+        assert out.returncode == 0, out.stderr
+        assert f"127.0.0.1:{port}" in out.stdout
+        assert "255    190" in out.stdout, out.stdout  # the learned route of the ground station
+        assert "copter" in out.stdout and "STABILIZE" in out.stdout
+    finally:
+        assert stop(proc) == 0
+    assert not (tmp_path / "state" / "gcsd.sock").exists(), "the control socket is removed at stop"
+
+
+def test_status_without_a_daemon_fails_clearly(tmp_path):
+    cfg = write_config(tmp_path)
+    out = subprocess.run([sys.executable, "-m", "gcsd", "status", "-c", str(cfg)],
+                         capture_output=True, text=True, timeout=10)
+    assert out.returncode == 1 and "no daemon answers" in out.stderr
+
+
+def test_tlog_records_frames_in_both_directions_readably(daemon, client, tmp_path):
+    tlog = tmp_path / "run.tlog"
+    d = daemon({"log": {"tlog": str(tlog)},
+                "channels": [{"name": "gcs", "type": "udp-server", "address": "127.0.0.1:0"}]})
+    c = client(udp_url(d.port("gcs")))
+    c.heartbeat()
+    c.command_long(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+    pump([c], 1.5)
+    d.stop()
+    log = mavutil.mavlink_connection(str(tlog))
+    seen = set()
+    while (msg := log.recv_match()) is not None:
+        seen.add((msg.get_type(), msg.get_srcSystem()))
+    assert ("HEARTBEAT", 255) in seen and ("COMMAND_LONG", 255) in seen, "frames in"
+    assert ("HEARTBEAT", 1) in seen and ("COMMAND_ACK", 1) in seen, "frames out"
