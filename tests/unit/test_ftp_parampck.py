@@ -272,7 +272,7 @@ def test_at_most_four_param_files_are_open_at_once(tmp_path, params):
     assert is_ack(clients[4].one(Op.OPEN_FILE_RO, b"@PARAM/param.pck"))
 
 
-@pytest.mark.parametrize("op,data", [(Op.REMOVE_FILE, b"@PARAM/param.pck"), (Op.CREATE_DIRECTORY, b"@PARAM/x"),
+@pytest.mark.parametrize("op,data", [(Op.REMOVE_FILE, b"@PARAM/param.pck"), (Op.CREATE_DIRECTORY, b"@PARAM"),
                                      (Op.RENAME, b"@PARAM/param.pck\0x"), (Op.TRUNCATE_FILE, b"@PARAM/param.pck")])
 def test_virtual_files_cannot_be_removed_renamed_or_truncated(gcs, op, data):
     assert nak_code(gcs.one(op, data)) == Nak.FILE_PROTECTED

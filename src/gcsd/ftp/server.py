@@ -263,8 +263,10 @@ class FtpServer:
         return [req.ack()]
 
     def _real_path(self, raw_path: bytes) -> bytes:
-        if split_virtual(raw_path) is not None:
-            raise FtpError(Nak.FILE_PROTECTED)
+        """A path for a filesystem-changing opcode: virtual names are protected, or unknown."""
+        virtual = split_virtual(raw_path)
+        if virtual is not None:
+            raise FtpError(Nak.FILE_PROTECTED if self.virtual.exists(*virtual) else Nak.FILE_NOT_FOUND)
         return raw_path
 
     def _path_op(self, fn: Callable[[bytes], None]):

@@ -11,8 +11,8 @@ A path is virtual when, after at most one leading "/", it starts with "@". Names
   life: another size is EINVAL (the padding depends on it), except a read that reaches the end
   of the file (a client's short last read), which is served.
 - `@MISSION/mission.dat|fence.dat|rally.dat`: see mission_files.py.
-- Any other `@` name is FileNotFound. Virtual files cannot be removed, renamed, truncated or
-  made into directories (FileProtected).
+- Any other `@` name is FileNotFound. The virtual files and directories cannot be removed,
+  renamed, truncated or made into directories (FileProtected).
 
 Handles share one small interface with fs.RealFile: `size`, `writable`, `read(offset, count)`,
 `write(offset, data)`, `close()` (may raise FtpError: the answer to TerminateSession) and
@@ -182,6 +182,14 @@ class VirtualFiles:
         if root == MISSION_DIR and self.missions is not None:
             return self.missions.list_dir()
         raise FtpError(Nak.FILE_NOT_FOUND)
+
+    def exists(self, root: str, rest: str) -> bool:
+        """A virtual directory or file that is served here (its query aside)."""
+        if root == PARAM_DIR and self.params is not None:
+            return rest in ("", PARAM_FILE) or rest.startswith(PARAM_FILE + "?")
+        if root == MISSION_DIR and self.missions is not None:
+            return rest == "" or rest in self.missions.names()
+        return False
 
     def root_entries(self) -> list[DirEntry]:
         """The virtual directories, listed after the real entries of "/"."""
