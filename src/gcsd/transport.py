@@ -217,7 +217,8 @@ async def run_channel(
                 if timeout > 0:
                     wakeup.clear()
                     waiter = asyncio.ensure_future(wakeup.wait())
-                    done, _ = await asyncio.wait({waiter, closed}, timeout=timeout)
+                    done, _ = await asyncio.wait(
+                        {waiter, closed}, timeout=timeout, return_when=asyncio.FIRST_COMPLETED)
                     if waiter not in done:
                         waiter.cancel()
                 else:
