@@ -121,7 +121,8 @@ def test_integer_values_are_twos_complement_in_their_own_size():
 
 def _random_params(n: int, seed: int) -> list[P]:
     rng = random.Random(seed)
-    prefixes = ["ARMING_", "BATT_", "BATT2_", "COMPASS_OFS", "RC", "SERVO", "SR0_", "SR1_", "INS_ACC", "Q_A_RAT_"]
+    prefixes = ["ARMING_", "BATT_", "BATT2_", "COMPASS_OFS", "RC", "SERVO", "SR0_", "SR1_", "INS_ACC",
+                "Q_A_RAT_"]
     names = set()
     while len(names) < n:
         names.add((rng.choice(prefixes) + "".join(rng.choice("ABCDEFGHIJ_0123456789")
@@ -201,7 +202,8 @@ def test_query_is_parsed(text, query):
     assert parse_query(text) == query
 
 
-@pytest.mark.parametrize("text", ["start=65535", "count=70000", "withdefaults=2", "start=-1", "start=x", "count"])
+@pytest.mark.parametrize("text", ["start=65535", "count=70000", "withdefaults=2", "start=-1", "start=x",
+                                  "count"])
 def test_bad_query_values_are_refused(text):
     assert parse_query(text) is None
 
@@ -272,8 +274,10 @@ def test_at_most_four_param_files_are_open_at_once(tmp_path, params):
     assert is_ack(clients[4].one(Op.OPEN_FILE_RO, b"@PARAM/param.pck"))
 
 
-@pytest.mark.parametrize("op,data", [(Op.REMOVE_FILE, b"@PARAM/param.pck"), (Op.CREATE_DIRECTORY, b"@PARAM"),
-                                     (Op.RENAME, b"@PARAM/param.pck\0x"), (Op.TRUNCATE_FILE, b"@PARAM/param.pck")])
+@pytest.mark.parametrize("op,data", [
+    (Op.REMOVE_FILE, b"@PARAM/param.pck"), (Op.CREATE_DIRECTORY, b"@PARAM"),
+    (Op.RENAME, b"@PARAM/param.pck\0x"), (Op.TRUNCATE_FILE, b"@PARAM/param.pck"),
+])
 def test_virtual_files_cannot_be_removed_renamed_or_truncated(gcs, op, data):
     assert nak_code(gcs.one(op, data)) == Nak.FILE_PROTECTED
 
@@ -287,7 +291,8 @@ def mavproxy_upload(values: dict[str, float]) -> bytes:
     for name in sorted(values):
         v = float(values[name])
         code = 4 if not v.is_integer() else 1 if -128 <= v <= 127 else 2 if -32768 <= v <= 32767 else 3
-        common = next((i for i in range(min(len(last), len(name))) if last[i] != name[i]), min(len(last), len(name)))
+        shortest = min(len(last), len(name))
+        common = next((i for i in range(shortest) if last[i] != name[i]), shortest)
         out += struct.pack("<BB", code, common | ((len(name) - (common + 1)) << 4)) + name[common:].encode()
         out += struct.pack({1: "<b", 2: "<h", 3: "<i", 4: "<f"}[code], v if code == 4 else int(v))
         last = name

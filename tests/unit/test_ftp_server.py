@@ -42,7 +42,8 @@ def opened(gcs: Gcs, name: bytes, now: float = 0.0) -> int:
 
 def test_none_is_acked_with_seq_plus_one_same_session_and_req_opcode(gcs):
     reply = gcs.one(Op.NONE, seq=41)
-    assert (reply.opcode, reply.seq, reply.session, reply.req_opcode, reply.size) == (Op.ACK, 42, 1, Op.NONE, 0)
+    got = (reply.opcode, reply.seq, reply.session, reply.req_opcode, reply.size)
+    assert got == (Op.ACK, 42, 1, Op.NONE, 0)
 
 
 def test_reply_goes_to_the_requester_on_its_channel(server):

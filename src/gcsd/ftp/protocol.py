@@ -81,7 +81,8 @@ class Payload:
         if len(raw) < PAYLOAD_BYTES:
             raw = raw + bytes(PAYLOAD_BYTES - len(raw))
         seq, session, opcode, size, req_opcode, burst_complete, offset = _HEADER.unpack_from(raw)
-        return cls(seq, session, opcode, size, req_opcode, burst_complete, offset, raw[HEADER_BYTES:PAYLOAD_BYTES])
+        data = raw[HEADER_BYTES:PAYLOAD_BYTES]
+        return cls(seq, session, opcode, size, req_opcode, burst_complete, offset, data)
 
     def pack(self) -> bytes:
         data = self.data[:DATA_MAX]
@@ -99,7 +100,8 @@ class Payload:
             burst_complete=burst_complete, offset=self.offset if offset is None else offset, data=data,
         )
 
-    def ack(self, data: bytes = b"", offset: int | None = None, burst_complete: int = 0, seq_step: int = 1) -> "Payload":
+    def ack(self, data: bytes = b"", offset: int | None = None, burst_complete: int = 0,
+            seq_step: int = 1) -> "Payload":
         return self.reply(Op.ACK, len(data), data, offset, burst_complete, seq_step)
 
     def nak(self, code: int, errno_value: int = 0, offset: int | None = None, burst_complete: int = 0,

@@ -137,7 +137,8 @@ class FtpService(Service):
             sent += 1
             if bandwidth:
                 start = max(self._next_burst_s.get(index, 0.0), now)
-                self._next_burst_s[index] = start + BURST_BANDWIDTH_SHARE * len(packets[0].payload) / bandwidth
+                gap_s = BURST_BANDWIDTH_SHARE * len(packets[0].payload) / bandwidth
+                self._next_burst_s[index] = start + gap_s
         return now
 
     def _send(self, channel, out: Outgoing, now: float, send) -> bool:
