@@ -1,0 +1,99 @@
+"""A serial channel over a PTY pair: the daemon opens the slave side as its serial device, the
+test reads and writes the master side with a pymavlink parser."""
+
+from __future__ import annotations
+
+import os
+import tty
+
+import pytest
+
+from .helpers import M, VEHICLE, packed, read_fd
+
+GCS = (255, 190)
+MAX_FRAME_BYTES = 280  # a MAVLink2 frame: 10 header + 255 payload + 2 CRC + 13 signature
+
+
+class Pty:
+    """The test's end of a serial line: write frames, parse what comes back."""
+
+    def __init__(self) -> None:
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        os.set_blocking(self.master, False)
+        self.path = os.ttyname(self.slave)
+        self.parser = M.MAVLink(None)
+        self.parser.robust_parsing = True
+        self.raw = bytearray()
+        self.msgs: list = []
+
+    def send(self, msg) -> None:
+        os.write(self.master, packed(msg, *GCS))
+
+    def read(self, seconds: float) -> int:
+        """Read for `seconds`; returns the number of bytes read."""
+        chunk = bytearray()
+        read_fd(self.master, seconds, chunk)
+        self.raw += chunk
+        self.msgs += [m for m in self.parser.parse_buffer(bytes(chunk)) or [] if m.get_type() != "BAD_DATA"]
+        return len(chunk)
+
+    def wait_for(self, match, timeout: float = 3.0):
+        for _ in range(int(timeout / 0.1)):
+            found = [m for m in self.msgs if match(m)]
+            if found:
+                return found[0]
+            self.read(0.1)
+        return None
+
+    def close(self) -> None:
+        for fd in (self.master, self.slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+@pytest.fixture
+def pty():
+    p = Pty()
+    yield p
+    p.close()  # after the daemon (requested later by the test) has stopped
+
+
+def _serial_daemon(daemon, pty: Pty, **extra):
+    return daemon({"channels": [{"name": "radio", "type": "serial", "device": pty.path, **extra}]})
+
+
+def test_serial_channel_exchanges_heartbeat_and_command(pty, daemon):
+    _serial_daemon(daemon, pty, baud=115200)
+    pty.send(M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3))
+    hb = pty.wait_for(lambda m: m.get_type() == "HEARTBEAT")
+    assert hb is not None
+    assert (hb.get_srcSystem(), hb.get_srcComponent()) == VEHICLE
+    assert hb.autopilot == M.MAV_AUTOPILOT_ARDUPILOTMEGA
+
+    pty.send(M.MAVLink_command_long_message(*VEHICLE, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0))
+    ack = pty.wait_for(lambda m: m.get_type() == "COMMAND_ACK" and m.command == M.MAV_CMD_COMPONENT_ARM_DISARM)
+    assert ack is not None
+    assert ack.result == M.MAV_RESULT_ACCEPTED
+    assert (ack.target_system, ack.target_component) == GCS
+    armed = pty.wait_for(lambda m: m.get_type() == "HEARTBEAT" and m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+    assert armed is not None
+
+
+def test_serial_bandwidth_defaults_to_a_tenth_of_the_baud_rate(pty, daemon):
+    baud = 9600
+    fast = {name: 50 for name in ("raw_sens", "ext_stat", "rc_chan", "position", "extra1", "extra2", "extra3")}
+    _serial_daemon(daemon, pty, baud=baud, streams=fast)
+    pty.send(M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3))
+    pty.send(M.MAVLink_request_data_stream_message(*VEHICLE, M.MAV_DATA_STREAM_ALL, 50, 1))
+    pty.read(1.0)  # past the initial burst of a full token bucket
+    seconds = 3.0
+    received = pty.read(seconds)
+    budget = baud / 10
+    # the budget is a token bucket holding at most one maximal frame at this rate (SPEC: bandwidth),
+    # and one more frame may straddle the edge of the measuring window
+    assert received <= budget * seconds + 2 * MAX_FRAME_BYTES, f"{received / seconds:.0f} B/s on a {budget:.0f} B/s link"
+    assert received >= budget * seconds * 0.5, f"only {received / seconds:.0f} B/s: streams ask for more than that"
+    assert any(m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1 for m in pty.msgs)
