@@ -136,11 +136,31 @@ def _launch(name: str, argv: list[str], workdir: Path, env: dict | None = None) 
     return Launched(name, popen, log_path, argv)
 
 
-def gcsd_available() -> tuple[bool, str]:
+def gcsd_env(src_dir: Path | None) -> dict | None:
+    """Environment that makes ``python -m gcsd`` import the package from src_dir (None: as installed)."""
+    if src_dir is None:
+        return None
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(src_dir), env.get("PYTHONPATH", "")) if p)
+    return env
+
+
+def export_gcsd_rev(repo: Path, rev: str, dest: Path) -> tuple[Path, str]:
+    """``git archive REV src`` into dest; returns (the src directory to import from, short commit)."""
+    commit = subprocess.run(["git", "rev-parse", "--short", rev], cwd=repo, capture_output=True, text=True,
+                            check=True).stdout.strip()
+    dest.mkdir(parents=True, exist_ok=True)
+    archive = subprocess.run(["git", "archive", "--format=tar", commit, "src"], cwd=repo, capture_output=True,
+                             check=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
+    return dest / "src", commit
+
+
+def gcsd_available(env: dict | None = None) -> tuple[bool, str]:
     """Is gcsd importable and does ``python -m gcsd --version`` work?"""
     try:
         out = subprocess.run([sys.executable, "-m", "gcsd", "--version"], capture_output=True,
-                             text=True, timeout=30)
+                             text=True, timeout=30, env=env)
     except (OSError, subprocess.TimeoutExpired) as exc:
         return False, str(exc)
     text = (out.stdout + out.stderr).strip()
@@ -163,12 +183,12 @@ def gcsd_config(workdir: Path, channels: list[str], extra: str = "") -> Path:
     return cfg
 
 
-def start_gcsd(workdir: Path, cfg: Path, profile_out: Path | None = None) -> Launched:
+def start_gcsd(workdir: Path, cfg: Path, profile_out: Path | None = None, env: dict | None = None) -> Launched:
     argv = [sys.executable]
     if profile_out is not None:
         argv += ["-m", "cProfile", "-o", str(profile_out)]
     argv += ["-m", "gcsd", "run", "-c", str(cfg)]
-    return _launch("gcsd", argv, workdir)
+    return _launch("gcsd", argv, workdir, env)
 
 
 def routing_gcsd_config(workdir: Path, port_a: int, port_b: int) -> Path:
