@@ -27,6 +27,7 @@ from .params import ParamStore, base_params
 from .services import Incoming
 from .services.commands import CommandService
 from .services.control import ControlService
+from .services.mission import MissionService
 from .services.params import ParamService
 from .services.rates import RatesService
 from .services.statustext import StatusTextQueue
@@ -93,6 +94,8 @@ class VehicleNode:
         self.commands = CommandService(self, table)
         self.services.append(self.commands)
         self._build_dispatch()
+        self.mission = MissionService(self, config.mission, self.state_dir)
+        self.add_service(self.mission)
         try:
             self.param_service.save()  # the boot count
         except OSError as exc:

@@ -178,7 +178,7 @@ def nav_controller_output(node, channel, now):
 
 
 def mission_current(node, channel, now):
-    return M.MAVLink_mission_current_message(0, 0, M.MISSION_STATE_NO_MISSION, 0)
+    return node.mission.current_message()
 
 
 def ahrs(node, channel, now):

@@ -1,0 +1,332 @@
+"""The mission-item transfer machine: one per mission type, pure, time passed in as `now`.
+
+It takes decoded requests from an `Origin` (sysid, compid, the opaque channel they came on, and
+whether that link speaks MAVLink1) and returns what to do: `Send(channel, msg)`, `Text(...)`
+and `PlanChanged` when the store's plan was replaced. `tick(now)` runs the timers and
+`next_deadline()` says when it next needs to. It never touches a socket, a file or a clock.
+
+States and transitions (REFERENCE.md 7.1, with SPEC.md's improvements marked *):
+
+    IDLE --MISSION_COUNT(n > 0) / WRITE_PARTIAL_LIST(start..end)--> RECEIVING(owner, channel)
+    RECEIVING --item seq == next, not last--> RECEIVING (request next at once)
+    RECEIVING --last item--> IDLE: the whole plan is checked, saved and adopted, ACK ACCEPTED;
+              or ACK ERROR with the reason as STATUSTEXT and the old plan kept (*atomic upload)
+    RECEIVING --item rejected by the store--> IDLE, ACK with that item's result, old plan kept
+    RECEIVING --8 s without a valid item--> IDLE, "<Type> upload timeout" + OPERATION_CANCELLED
+    RECEIVING --MISSION_COUNT / CLEAR_ALL / MISSION_ACK from the owner--> the upload is dropped
+              silently (a MISSION_ACK from the owner is how MAVSDK cancels*) and the new request runs
+
+While RECEIVING: the next item is requested with MISSION_REQUEST (msg 40, as ArduPilot does)
+targeted at the owner on the channel the upload began on; no item for `retry_s` (1 s) plus the
+link's radio slowdown sends the request again, without limit until the 8 s abort. Requests from
+any other (sysid, compid) get DENIED (*ownership), items from the owner may come on any channel.
+
+Result codes: fence/rally over a MAVLink1 link UNSUPPORTED ("Need mavlink2 for item transfer");
+count above the store's limit NO_SPACE ("Only N items are supported"); an item with seq beyond
+the expected one INVALID_SEQUENCE (the upload goes on); an item again for a seq already received
+is ignored* (ArduPilot answers INVALID_SEQUENCE, which makes MAVSDK abandon the upload); an item
+when nothing is being received ERROR, except the final item of the last completed upload from
+the same node, which gets that upload's ACK again* (its first ACK was lost).
+
+Downloads keep no state, as in ArduPilot: REQUEST_LIST -> MISSION_COUNT (DENIED while
+receiving); REQUEST_INT -> MISSION_ITEM_INT (DENIED while receiving; out of range ->
+MISSION_COUNT then INVALID_SEQUENCE); legacy REQUEST -> MISSION_ITEM with a once-per-list
+warning. Requests may be pipelined and out of order; each is answered on its own. The GCS's
+final MISSION_ACK of a download needs no answer.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Hashable
+
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from .items import MissionItem, item_float_message, item_int_message
+from .stores import PlanStore
+
+RETRY_S = 1.0
+ABORT_S = 8.0
+ACCEPTED, ERROR, DENIED = M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_ERROR, M.MAV_MISSION_DENIED
+
+
+@dataclass(frozen=True, slots=True)
+class Origin:
+    """Who sent a request and where from; `channel` is opaque (replies go back through it)."""
+
+    sysid: int
+    compid: int
+    channel: Hashable
+    mavlink1: bool = False
+
+    @property
+    def node(self) -> tuple[int, int]:
+        return self.sysid, self.compid
+
+
+@dataclass(frozen=True, slots=True)
+class Send:
+    channel: Hashable
+    msg: object
+
+
+@dataclass(frozen=True, slots=True)
+class Text:
+    severity: int
+    text: str
+    channel: Hashable | None = None  # None: every ground station
+
+
+@dataclass(frozen=True, slots=True)
+class PlanChanged:
+    mission_type: int
+    count: int
+
+
+Output = Send | Text | PlanChanged
+
+
+@dataclass(slots=True)
+class _Upload:
+    owner: tuple[int, int]
+    channel: Hashable
+    start: int
+    end: int  # last seq, inclusive
+    partial: bool
+    plan_count: int  # items in the plan once this upload is in
+    next_seq: int
+    last_item_s: float
+    last_request_s: float
+    items: list[MissionItem] = field(default_factory=list)
+    warned_legacy: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class _Finished:
+    owner: tuple[int, int]
+    seq: int
+    result: int
+
+
+class MissionTransfer:
+    def __init__(self, store: PlanStore, retry_s: float = RETRY_S, abort_s: float = ABORT_S,
+                 slowdown_s: Callable[[Hashable], float] = lambda channel: 0.0) -> None:
+        self.store = store
+        self.retry_s = retry_s
+        self.abort_s = abort_s
+        self.slowdown_s = slowdown_s
+        self.mission_type = store.mission_type
+        self._upload: _Upload | None = None
+        self._finished: _Finished | None = None
+        self._download_warned: set[tuple[int, int]] = set()
+
+    # --- what the adapter may ask ------------------------------------------------------------
+    @property
+    def receiving(self) -> bool:
+        return self._upload is not None
+
+    @property
+    def upload_channel(self) -> Hashable | None:
+        return None if self._upload is None else self._upload.channel
+
+    @property
+    def uploader(self) -> tuple[int, int] | None:
+        return None if self._upload is None else self._upload.owner
+
+    def next_deadline(self) -> float | None:
+        up = self._upload
+        if up is None:
+            return None
+        return min(up.last_request_s + self.retry_s + self.slowdown_s(up.channel), up.last_item_s + self.abort_s)
+
+    # --- upload ------------------------------------------------------------------------------
+    def mission_count(self, origin: Origin, count: int, now: float) -> list[Output]:
+        refused = self._refuse_upload(origin, deny_owner=False)
+        if refused:
+            return refused
+        self._upload = None  # a new MISSION_COUNT from the owner replaces its upload
+        self._finished = None
+        if count > self.store.max_items:
+            return self._no_space(origin)
+        if count == 0:
+            return self._clear_and_ack(origin)
+        return self._start(origin, 0, count - 1, False, count, now)
+
+    def mission_write_partial_list(self, origin: Origin, start: int, end: int, now: float) -> list[Output]:
+        refused = self._refuse_upload(origin, deny_owner=True)
+        if refused:
+            return refused
+        count = self.store.count()
+        if start < 0 or end < start or start > count or end > count:
+            return [Text(M.MAV_SEVERITY_WARNING, "Flight plan update rejected", origin.channel),
+                    self._ack(origin, ERROR)]
+        if end + 1 > self.store.max_items:
+            return self._no_space(origin)
+        self._finished = None
+        return self._start(origin, start, end, True, max(count, end + 1), now)
+
+    def mission_item(self, origin: Origin, seq: int, item: MissionItem | int, legacy: bool,
+                     now: float) -> list[Output]:
+        """An item (or the result its conversion failed with) from MISSION_ITEM(_INT)."""
+        up = self._upload
+        if up is None:
+            done = self._finished
+            if done is not None and done.owner == origin.node and done.seq == seq:
+                return [self._ack(origin, done.result)]
+            return [self._ack(origin, ERROR)]
+        if origin.node != up.owner:
+            return [self._ack(origin, DENIED)]
+        if seq != up.next_seq:
+            if up.start <= seq < up.next_seq:
+                return []  # a duplicate of an item already in: our re-request crossed it
+            return [self._ack(origin, M.MAV_MISSION_INVALID_SEQUENCE)]
+        out: list[Output] = []
+        if legacy and not up.warned_legacy:
+            up.warned_legacy = True
+            out.append(Text(M.MAV_SEVERITY_WARNING, "got MISSION_ITEM; GCS should send MISSION_ITEM_INT", up.channel))
+        result = item if isinstance(item, int) else self.store.check_item(item, seq, up.plan_count)
+        if result != ACCEPTED:
+            self._upload = None
+            return out + [self._ack_owner(up, result)]
+        up.items.append(item)
+        up.last_item_s = now
+        if seq == up.end:
+            return out + self._complete(up)
+        up.next_seq = seq + 1
+        up.last_request_s = now
+        return out + [self._request(up)]
+
+    def mission_ack(self, origin: Origin, now: float) -> list[Output]:
+        """A MISSION_ACK from the uploader ends its upload (cancelled); anything else is ignored."""
+        if self._upload is not None and self._upload.owner == origin.node:
+            self._upload = None
+        return []
+
+    # --- download ----------------------------------------------------------------------------
+    def mission_request_list(self, origin: Origin, now: float) -> list[Output]:
+        if self._upload is not None:
+            return [self._ack(origin, DENIED)]
+        self._download_warned.discard(origin.node)
+        return [self._count(origin)]
+
+    def mission_request(self, origin: Origin, seq: int, legacy: bool, now: float) -> list[Output]:
+        if self._upload is not None and not legacy:
+            return [self._ack(origin, DENIED)]
+        item = self.store.item(seq)
+        if item is None:
+            return [self._count(origin), self._ack(origin, M.MAV_MISSION_INVALID_SEQUENCE)]
+        target = origin.node
+        if not legacy:
+            return [Send(origin.channel, item_int_message(item, seq, self.mission_type, target))]
+        out: list[Output] = []
+        if origin.node not in self._download_warned:
+            self._download_warned.add(origin.node)
+            out.append(Text(M.MAV_SEVERITY_WARNING, "got MISSION_REQUEST; use MISSION_REQUEST_INT!", origin.channel))
+        out.append(Send(origin.channel, item_float_message(item, seq, self.mission_type, target)))
+        return out
+
+    # --- clear -------------------------------------------------------------------------------
+    def denies(self, origin: Origin) -> bool:
+        """True while another node is uploading this type."""
+        return self._upload is not None and self._upload.owner != origin.node
+
+    def mission_clear_all(self, origin: Origin, now: float) -> list[Output]:
+        if self.denies(origin):
+            return [self._ack(origin, DENIED)]
+        return self._clear_and_ack(origin)
+
+    def clear(self, origin: Origin) -> tuple[int, list[Output]]:
+        """Clear for `origin` (not denied): the result and what to send besides the ACK."""
+        self._upload = None
+        self._finished = None
+        if self.store.clear_refused():
+            return ERROR, []
+        try:
+            self.store.replace(())
+        except OSError as exc:
+            return ERROR, [self._save_failed(exc)]
+        return ACCEPTED, [PlanChanged(self.mission_type, self.store.count())]
+
+    # --- time --------------------------------------------------------------------------------
+    def tick(self, now: float) -> list[Output]:
+        up = self._upload
+        if up is None:
+            return []
+        if now >= up.last_item_s + self.abort_s:
+            self._upload = None
+            return [Text(M.MAV_SEVERITY_WARNING, f"{self.store.label} upload timeout", up.channel),
+                    self._ack_owner(up, M.MAV_MISSION_OPERATION_CANCELLED)]
+        if now >= up.last_request_s + self.retry_s + self.slowdown_s(up.channel):
+            up.last_request_s = now
+            return [self._request(up)]
+        return []
+
+    # --- internals ---------------------------------------------------------------------------
+    def _refuse_upload(self, origin: Origin, deny_owner: bool) -> list[Output]:
+        if origin.mavlink1 and self.mission_type != M.MAV_MISSION_TYPE_MISSION:
+            return [Text(M.MAV_SEVERITY_WARNING, "Need mavlink2 for item transfer", origin.channel),
+                    self._ack(origin, M.MAV_MISSION_UNSUPPORTED)]
+        if self._upload is not None and (deny_owner or self._upload.owner != origin.node):
+            return [self._ack(origin, DENIED)]
+        return []
+
+    def _start(self, origin: Origin, start: int, end: int, partial: bool, plan_count: int,
+               now: float) -> list[Output]:
+        up = _Upload(origin.node, origin.channel, start, end, partial, plan_count, start, now, now)
+        self._upload = up
+        return [self._request(up)]
+
+    def _complete(self, up: _Upload) -> list[Output]:
+        self._upload = None
+        if up.partial:
+            plan = list(self.store.stored())
+            for seq, item in enumerate(up.items, up.start):
+                if seq < len(plan):
+                    plan[seq] = item
+                else:
+                    plan.append(item)
+        else:
+            plan = up.items
+        out: list[Output] = []
+        reason = self.store.check_plan(tuple(plan))
+        if reason is not None:
+            out.append(Text(M.MAV_SEVERITY_WARNING, reason))
+            result = ERROR
+        else:
+            try:
+                self.store.replace(tuple(plan))
+            except OSError as exc:
+                out.append(self._save_failed(exc))
+                result = ERROR
+            else:
+                result = ACCEPTED
+                out.append(PlanChanged(self.mission_type, self.store.count()))
+                text = self.store.completed_text()
+                if text:
+                    out.append(Text(M.MAV_SEVERITY_INFO, text))
+        self._finished = _Finished(up.owner, up.end, result)
+        out.append(self._ack_owner(up, result))
+        return out
+
+    def _clear_and_ack(self, origin: Origin) -> list[Output]:
+        result, out = self.clear(origin)
+        return out + [self._ack(origin, result)]
+
+    def _no_space(self, origin: Origin) -> list[Output]:
+        return [Text(M.MAV_SEVERITY_WARNING, f"Only {self.store.max_items} items are supported", origin.channel),
+                self._ack(origin, M.MAV_MISSION_NO_SPACE)]
+
+    def _save_failed(self, exc: OSError) -> Text:
+        return Text(M.MAV_SEVERITY_ERROR, f"{self.store.label} not saved: {exc.strerror or exc}")
+
+    def _request(self, up: _Upload) -> Send:
+        return Send(up.channel, M.MAVLink_mission_request_message(*up.owner, up.next_seq, self.mission_type))
+
+    def _count(self, origin: Origin) -> Send:
+        return Send(origin.channel, M.MAVLink_mission_count_message(*origin.node, self.store.count(), self.mission_type))
+
+    def _ack(self, origin: Origin, result: int) -> Send:
+        return Send(origin.channel, M.MAVLink_mission_ack_message(*origin.node, result, self.mission_type))
+
+    def _ack_owner(self, up: _Upload, result: int) -> Send:
+        return Send(up.channel, M.MAVLink_mission_ack_message(*up.owner, result, self.mission_type))

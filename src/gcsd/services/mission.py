@@ -1,0 +1,291 @@
+"""Missions, fence and rally on a vehicle node: the thin adapter around three MissionTransfers.
+
+MISSION_* messages are routed by their mission_type to that type's machine (gcsd.mission.transfer);
+an unknown type gets MISSION_ACK UNSUPPORTED (requests for items: silence, as in ArduPilot).
+MAV_MISSION_TYPE_ALL in MISSION_CLEAR_ALL clears all three (the MAVLink spec's meaning; ArduPilot
+answers UNSUPPORTED): DENIED if another node is uploading any of them, else one ACK with type ALL.
+What the machines return is written out here: `Send` with `node.reply` on its channel, `Text` as
+STATUSTEXT (on that channel, or every ground station), `PlanChanged` logged and MISSION_CURRENT
+pushed. While an upload requests items on a link, that link's streams run x4 slower
+(`Link.set_slow("mission", ...)`). The machines' timers (re-request after `mission.retry_ms`,
+abort after 8 s) run from the node's send pass: `pending(channel, now, send)` ticks them and
+returns their next deadline, so the channel task wakes in time.
+
+Persistence: `<state_dir>/mission.waypoints`, `fence.waypoints`, `rally.waypoints` (QGC WPL 110),
+written with gcsd.atomic (temporary file, fsync, rename, fsync of the directory) *before* a plan
+is adopted, so a crash at any moment leaves the previous plan or the new one. Read at start; a
+file that cannot be read or is not a valid plan is logged (`mission_file_invalid`, with the
+reason) and renamed to `<name>.waypoints.invalid`, never silently overwritten; that type starts
+empty.
+
+Also: MISSION_SET_CURRENT (pushes MISSION_CURRENT with the new seq; nothing on failure),
+MAV_CMD_DO_SET_MISSION_CURRENT (DENIED out of range), MISSION_CURRENT's content
+(`current_message`), the `item_reached(seq)` hook the simulation calls (MISSION_ITEM_REACHED to
+every ground station), and mission items with current = 2 / 3 (guided "fly to" / change
+altitude), which are not uploads: they go to `guided_handler` (ERROR until a simulation sets one).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Callable
+
+import structlog
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from ..atomic import write_atomic
+from ..config import MissionConfig
+from ..mission import wpl
+from ..mission.items import MissionItem, from_item_float, from_item_int
+from ..mission.stores import FenceStore, MissionStore, PlanStore, RallyStore
+from ..mission.transfer import MissionTransfer, Origin, PlanChanged, Send, Text
+from . import Incoming, Service
+from .commands import CommandRequest
+
+log = structlog.get_logger("gcsd.mission")
+
+SLOW_REASON = "mission"
+GUIDED_CURRENT = (2, 3)  # MISSION_ITEM.current: 2 guided "fly to", 3 change altitude
+
+
+def home_item(state) -> MissionItem:
+    """Item 0 as ArduPilot serves it: a NAV_WAYPOINT at home, absolute altitude."""
+    return MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 0, 1, 0.0, 0.0, 0.0, 0.0,
+                       int(round(state.home_lat * 1e7)), int(round(state.home_lon * 1e7)), float(state.home_alt_m))
+
+
+class MissionService(Service):
+    capabilities = (
+        M.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | M.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+        | M.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE | M.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
+    )
+
+    def __init__(self, node, config: MissionConfig = MissionConfig(), state_dir: Path | None = None) -> None:
+        self.node = node
+        self.state_dir = None if state_dir is None else Path(state_dir)
+        self.mission = MissionStore(config.max_items, lambda: home_item(node.state), self._saver("mission"))
+        self.fence = FenceStore(config.max_fence, self._saver("fence"))
+        self.rally = RallyStore(config.max_rally, self._saver("rally"))
+        stores: tuple[PlanStore, ...] = (self.mission, self.fence, self.rally)
+        for store in stores:
+            self._load(store)
+        if node.state.has_home:
+            self.mission.home_changed()
+        self.transfers = {
+            s.mission_type: MissionTransfer(s, retry_s=config.retry_ms / 1000.0, slowdown_s=self._slowdown_s)
+            for s in stores
+        }
+        self.guided_handler: Callable[[MissionItem, int], bool] | None = None
+        self.reached_seq: int | None = None
+        self.complete = False
+        self._slowed: set[int] = set()  # channel indices whose streams we slowed
+
+    def commands(self):
+        return {M.MAV_CMD_DO_SET_MISSION_CURRENT: self.do_set_mission_current}
+
+    # --- upload ------------------------------------------------------------------------------
+    def handle_MISSION_COUNT(self, inc: Incoming) -> None:
+        t = self._transfer(inc)
+        if t is not None:
+            self._run(t.mission_count(self._origin(inc), inc.msg.count, inc.now))
+
+    def handle_MISSION_WRITE_PARTIAL_LIST(self, inc: Incoming) -> None:
+        t = self._transfer(inc)
+        if t is not None:
+            m = inc.msg
+            self._run(t.mission_write_partial_list(self._origin(inc), m.start_index, m.end_index, inc.now))
+
+    def handle_MISSION_ITEM_INT(self, inc: Incoming) -> None:
+        self._item(inc, from_item_int(inc.msg), legacy=False)
+
+    def handle_MISSION_ITEM(self, inc: Incoming) -> None:
+        self._item(inc, from_item_float(inc.msg), legacy=True)
+
+    def _item(self, inc: Incoming, item: MissionItem | int, legacy: bool) -> None:
+        m = inc.msg
+        if m.mission_type == M.MAV_MISSION_TYPE_MISSION and m.current in GUIDED_CURRENT:
+            self._guided(inc, item, m.current)
+            return
+        t = self._transfer(inc)
+        if t is not None:
+            self._run(t.mission_item(self._origin(inc), m.seq, item, legacy, inc.now))
+
+    def handle_MISSION_ACK(self, inc: Incoming) -> None:
+        t = self.transfers.get(inc.msg.mission_type)
+        if t is not None:
+            self._run(t.mission_ack(self._origin(inc), inc.now))
+
+    # --- download ----------------------------------------------------------------------------
+    def handle_MISSION_REQUEST_LIST(self, inc: Incoming) -> None:
+        t = self._transfer(inc)
+        if t is not None:
+            self._run(t.mission_request_list(self._origin(inc), inc.now))
+
+    def handle_MISSION_REQUEST_INT(self, inc: Incoming) -> None:
+        t = self.transfers.get(inc.msg.mission_type)
+        if t is not None:
+            self._run(t.mission_request(self._origin(inc), inc.msg.seq, False, inc.now))
+
+    def handle_MISSION_REQUEST(self, inc: Incoming) -> None:
+        t = self.transfers.get(inc.msg.mission_type)
+        if t is not None:
+            self._run(t.mission_request(self._origin(inc), inc.msg.seq, True, inc.now))
+
+    # --- clear -------------------------------------------------------------------------------
+    def handle_MISSION_CLEAR_ALL(self, inc: Incoming) -> None:
+        mission_type = inc.msg.mission_type
+        origin = self._origin(inc)
+        if mission_type != M.MAV_MISSION_TYPE_ALL:
+            t = self._transfer(inc)
+            if t is not None:
+                self._run(t.mission_clear_all(origin, inc.now))
+            return
+        if any(t.denies(origin) for t in self.transfers.values()):
+            self._ack(inc, M.MAV_MISSION_DENIED)
+            return
+        result = M.MAV_MISSION_ACCEPTED
+        for t in self.transfers.values():
+            code, out = t.clear(origin)
+            self._run(out)
+            if result == M.MAV_MISSION_ACCEPTED:
+                result = code
+        self._ack(inc, result)
+
+    # --- current item ------------------------------------------------------------------------
+    def handle_MISSION_SET_CURRENT(self, inc: Incoming) -> None:
+        if self._set_current(inc.msg.seq):
+            self.node.link(inc.channel).push(M.MAVLINK_MSG_ID_MISSION_CURRENT)
+
+    def do_set_mission_current(self, req: CommandRequest) -> int:
+        if not math.isfinite(req.param1) or not 0 <= req.param1 < self.mission.count():
+            return M.MAV_RESULT_DENIED
+        if not self._set_current(int(req.param1)):
+            return M.MAV_RESULT_FAILED
+        self._push_current()
+        return M.MAV_RESULT_ACCEPTED
+
+    def _set_current(self, seq: int) -> bool:
+        if not self.mission.set_current(seq):
+            return False
+        self.complete = False
+        return True
+
+    def current_message(self):
+        """MISSION_CURRENT: the current item, the count without home, the mission's state."""
+        node = self.node
+        count = self.mission.count()
+        auto = node.vehicle.mode_number("AUTO")
+        in_auto = auto is not None and node.state.mode == auto
+        if count <= 1:
+            state = M.MISSION_STATE_NO_MISSION
+        elif self.complete:
+            state = M.MISSION_STATE_COMPLETE
+        elif in_auto and node.state.armed:
+            state = M.MISSION_STATE_ACTIVE
+        else:
+            state = M.MISSION_STATE_NOT_STARTED
+        return M.MAVLink_mission_current_message(self.mission.current_seq, max(count - 1, 0), state, int(in_auto))
+
+    def item_reached(self, seq: int) -> None:
+        """The vehicle reached mission item `seq`: MISSION_ITEM_REACHED to every ground station."""
+        self.reached_seq = seq
+        if seq >= self.mission.count() - 1:
+            self.complete = True
+        msg = M.MAVLink_mission_item_reached_message(seq)
+        for index in self.node.text_channels():
+            self.node.reply(self.node.channels[index], msg)
+
+    def home_changed(self) -> None:
+        """Home was set: with no mission, the mission becomes home alone."""
+        self.mission.home_changed()
+
+    # --- timers ------------------------------------------------------------------------------
+    def pending(self, channel, now: float, send) -> float | None:
+        """Called from the node's send pass: run the transfer timers; return the next deadline."""
+        for t in self.transfers.values():
+            out = t.tick(now)
+            if out:
+                self._run(out)
+        deadlines = [d for t in self.transfers.values() if (d := t.next_deadline()) is not None]
+        return min(deadlines) if deadlines else None
+
+    # --- plumbing ----------------------------------------------------------------------------
+    def _origin(self, inc: Incoming) -> Origin:
+        return Origin(inc.frame.sysid, inc.frame.compid, inc.channel, inc.channel.mavlink1)
+
+    def _transfer(self, inc: Incoming) -> MissionTransfer | None:
+        t = self.transfers.get(inc.msg.mission_type)
+        if t is None:
+            self._ack(inc, M.MAV_MISSION_UNSUPPORTED)
+        return t
+
+    def _ack(self, inc: Incoming, result: int) -> None:
+        sysid, compid = inc.sender
+        self.node.reply(inc.channel, M.MAVLink_mission_ack_message(sysid, compid, result, inc.msg.mission_type))
+
+    def _guided(self, inc: Incoming, item: MissionItem | int, current: int) -> None:
+        ok = not isinstance(item, int) and self.guided_handler is not None and self.guided_handler(item, current)
+        self._ack(inc, M.MAV_MISSION_ACCEPTED if ok else M.MAV_MISSION_ERROR)
+
+    def _run(self, outputs) -> None:
+        node = self.node
+        for out in outputs:
+            if isinstance(out, Send):
+                node.reply(out.channel, out.msg)
+            elif isinstance(out, Text):
+                node.send_text(out.severity, out.text, None if out.channel is None else {out.channel.index})
+            elif isinstance(out, PlanChanged):
+                log.info("mission_plan_replaced", type=_TYPE_NAMES[out.mission_type], count=out.count)
+                if out.mission_type == M.MAV_MISSION_TYPE_MISSION:
+                    self.complete = False
+                    self._push_current()
+        self._update_slow()
+
+    def _push_current(self) -> None:
+        for link in self.node.links:
+            link.push(M.MAVLINK_MSG_ID_MISSION_CURRENT)
+
+    def _update_slow(self) -> None:
+        uploading = {t.upload_channel.index for t in self.transfers.values() if t.receiving}
+        if uploading == self._slowed:
+            return
+        for index in uploading ^ self._slowed:
+            self.node.links[index].set_slow(SLOW_REASON, index in uploading)
+        self._slowed = uploading
+
+    def _slowdown_s(self, channel) -> float:
+        return self.node.link(channel).scheduler.slowdown_ms / 1000.0
+
+    # --- files -------------------------------------------------------------------------------
+    def _path(self, name: str) -> Path | None:
+        return None if self.state_dir is None else self.state_dir / f"{name}.waypoints"
+
+    def _saver(self, name: str):
+        path = self._path(name)
+        if path is None:
+            return lambda items: None
+        return lambda items: write_atomic(path, wpl.dumps(items))
+
+    def _load(self, store: PlanStore) -> None:
+        path = self._path(store.name)
+        if path is None or not path.exists():
+            return
+        try:
+            reason = store.load(wpl.loads(path.read_text(encoding="utf-8")))
+        except (OSError, UnicodeDecodeError, wpl.WplError) as exc:
+            reason = str(exc)
+        if reason is None:
+            log.info("mission_plan_loaded", type=store.name, count=store.count(), path=str(path))
+            return
+        kept = path.with_name(path.name + ".invalid")
+        try:
+            os.replace(path, kept)
+        except OSError as exc:
+            kept = f"not renamed: {exc}"
+        log.error("mission_file_invalid", type=store.name, path=str(path), reason=reason, kept_as=str(kept))
+
+
+_TYPE_NAMES = {M.MAV_MISSION_TYPE_MISSION: "mission", M.MAV_MISSION_TYPE_FENCE: "fence",
+               M.MAV_MISSION_TYPE_RALLY: "rally"}
