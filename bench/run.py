@@ -2,7 +2,7 @@
 
     python -m bench                      # everything (about 6-8 minutes)
     python -m bench --quick              # smoke run (about 1-2 minutes)
-    python -m bench throughput latency   # just these; also: harness, vehicle
+    python -m bench throughput latency   # just these; also: harness, vehicle, params
     python -m bench --routers mavproxy   # only one router (gcsd, mavproxy, or both: gcsd,mavproxy)
 
 Progress goes to stderr; the result table to stdout; ``--json FILE`` saves every figure and trial.
@@ -28,6 +28,7 @@ if __package__ in (None, ""):  # run as a script: python bench/run.py
     sys.path.insert(0, str(FsPath(__file__).resolve().parent.parent))
 
 from bench import measure  # noqa: E402
+from bench import params as bench_params  # noqa: E402
 from bench.measure import Path, SeqAllocator, log  # noqa: E402
 from bench.peers import start_receiver, start_sender  # noqa: E402
 from bench.routers import (  # noqa: E402
@@ -39,7 +40,7 @@ from bench.routers import (  # noqa: E402
     start_mavproxy,
 )
 
-WHAT = ("harness", "throughput", "latency", "vehicle")
+WHAT = ("harness", "throughput", "latency", "vehicle", "params")
 LATENCY_RATE = 1000
 
 
@@ -181,13 +182,13 @@ class Runner:
     # ----------------------------------------------------------------------------- measurements
     def run(self) -> None:
         a = self.a
-        if "gcsd" in a.routers or "vehicle" in a.what:
+        if "gcsd" in a.routers or a.what & {"vehicle", "params"}:
             ok, text = gcsd_available()
             self.res["gcsd_version"] = text
             if not ok:
                 self.notes.append(f"gcsd not runnable ({text}); its columns are n/a")
                 a.routers = [r for r in a.routers if r != "gcsd"]
-                a.what.discard("vehicle")
+                a.what -= {"vehicle", "params"}
                 log(f"gcsd not runnable: {text}")
         if a.what & {"harness", "throughput", "latency"}:
             self.harness()
@@ -196,6 +197,8 @@ class Runner:
                 self.routed(name)
         if "vehicle" in a.what:
             self.vehicle()
+        if "params" in a.what:
+            self.params()
 
     def harness(self) -> None:
         a = self.a
@@ -252,6 +255,12 @@ class Runner:
         except RuntimeError as exc:
             self.notes.append(f"gcsd vehicle: {exc}")
             log(f"[gcsd] vehicle FAILED: {exc}")
+
+    def params(self) -> None:
+        """Full PARAM_REQUEST_LIST download, 1 000 parameters: gcsd against MAVSDK's param_server."""
+        self.res["params"] = bench_params.measure(self.workdir, reps=3 if self.a.quick else 10,
+                                                  env=getattr(self, "gcsd_env", None))
+        self.notes += [f"params: {e}" for e in (r.error for r in self.res["params"].values()) if e]
 
     # ----------------------------------------------------------------------------------- output
     def table(self) -> str:
@@ -355,6 +364,9 @@ class Runner:
         extra += self.notes
         if extra:
             out += ["", *extra]
+        if self.res.get("params"):
+            out += ["", "Parameters: full list by PARAM_REQUEST_LIST on loopback, gcsd against MAVSDK's "
+                    "param_server (bench/params.py)", "", bench_params.table(self.res["params"])]
         return "\n".join(out)
 
 
