@@ -1,7 +1,7 @@
 """gcsd benchmark runner: routing throughput and latency against MAVProxy, and one vehicle's cost.
 
-    python -m bench                      # everything (about 6-8 minutes)
-    python -m bench --quick              # smoke run (about 1-2 minutes)
+    python -m bench                      # everything (about 5 minutes on an idle machine)
+    python -m bench --quick              # smoke run (about 1 minute)
     python -m bench throughput latency   # just these; also: harness, vehicle, params
     python -m bench --routers mavproxy   # only one router (gcsd, mavproxy, or both: gcsd,mavproxy)
 
@@ -32,9 +32,11 @@ from bench import params as bench_params  # noqa: E402
 from bench.measure import Path, SeqAllocator, log  # noqa: E402
 from bench.peers import start_receiver, start_sender  # noqa: E402
 from bench.routers import (  # noqa: E402
+    export_gcsd_rev,
     free_udp_port,
     gcsd_available,
     gcsd_config,
+    gcsd_env,
     routing_gcsd_config,
     start_gcsd,
     start_mavproxy,
@@ -83,6 +85,14 @@ def parse_args(argv):
     p.add_argument("--start-samples", type=int, help="launches timed to first HEARTBEAT (5; quick 1)")
     p.add_argument("--profile-gcsd", metavar="DIR",
                    help="run gcsd under cProfile; write DIR/gcsd-routing.prof and DIR/gcsd-vehicle.prof")
+    p.add_argument("--idle-threshold", type=float, default=15.0, metavar="PCT",
+                   help="before each trial wait until other processes use less than PCT%% of a core "
+                        "(default 15; 0 = never wait, never repeat disturbed trials)")
+    p.add_argument("--idle-wait", type=float, default=120.0, metavar="S",
+                   help="wait at most S seconds for that (default 120)")
+    p.add_argument("--gcsd-rev", metavar="REV",
+                   help="benchmark gcsd as committed at REV (git archive of src/ into the temporary "
+                        "directory, imported via PYTHONPATH) instead of the working tree")
     p.add_argument("--json", metavar="FILE", help="write all figures and trials as JSON")
     p.add_argument("--keep", action="store_true", help="keep the temporary directory (configs, logs)")
     a = p.parse_args(argv)
@@ -101,6 +111,10 @@ def parse_args(argv):
     a.cpu_s = a.cpu_s or (5.0 if q else 30.0)
     a.start_samples = a.start_samples or (1 if q else 5)
     return a
+
+
+def _short(text: str, limit: int = 400) -> str:
+    return text if len(text) <= limit else text[: limit - 5] + " ..."
 
 
 def _jsonable(x):
@@ -125,6 +139,13 @@ class Runner:
         self.res: dict = {"machine": machine(), "args": {k: (sorted(v) if isinstance(v, set) else v)
                                                          for k, v in vars(args).items()}}
         self.notes: list[str] = []
+        self.gcsd_env = None
+        if args.gcsd_rev:
+            src, commit = export_gcsd_rev(FsPath(__file__).resolve().parent.parent, args.gcsd_rev,
+                                          self.workdir / "gcsd-rev")
+            self.gcsd_env = gcsd_env(src)
+            self.res["machine"]["gcsd_commit"] = commit + " (exported)"
+            log(f"gcsd from commit {commit}, exported to {src}")
 
     # -------------------------------------------------------------------------------- helpers
     def peers(self):
@@ -139,7 +160,8 @@ class Runner:
         s, r = self.peers()
         s.call("dest", ("127.0.0.1", r.port))
         r.call("peer", None, False)
-        return Path("direct", s, r, self.seqs, ports={"receiver": r.port})
+        return Path("direct", s, r, self.seqs, ports={"receiver": r.port},
+                    idle_threshold_pct=self.a.idle_threshold, idle_wait_s=self.a.idle_wait)
 
     def router_path(self, name: str) -> Path:
         s, r = self.peers()
@@ -148,7 +170,7 @@ class Runner:
             port_b = free_udp_port()
             cfg = routing_gcsd_config(self.workdir, port_a, port_b)
             prof = self._profile("gcsd-routing.prof")
-            router = start_gcsd(self.workdir, cfg, prof)
+            router = start_gcsd(self.workdir, cfg, prof, self.gcsd_env)
             s.call("dest", ("127.0.0.1", port_a))
             r.call("peer", ("127.0.0.1", port_b), False)  # receiver is a udp-server client of channel b
         else:
@@ -158,7 +180,8 @@ class Runner:
         ports = {"router-in": port_a, "receiver": r.port}
         if name == "gcsd":
             ports["router-b"] = port_b
-        path = Path(name, s, r, self.seqs, router, ports)
+        path = Path(name, s, r, self.seqs, router, ports, idle_threshold_pct=self.a.idle_threshold,
+                    idle_wait_s=self.a.idle_wait)
         took = measure.wait_path_ready(path)
         log(f"[{name}] pid {router.pid}: routing after {took:.2f} s ({' '.join(router.argv[1:])})")
         return path
@@ -183,7 +206,7 @@ class Runner:
     def run(self) -> None:
         a = self.a
         if "gcsd" in a.routers or a.what & {"vehicle", "params"}:
-            ok, text = gcsd_available()
+            ok, text = gcsd_available(self.gcsd_env)
             self.res["gcsd_version"] = text
             if not ok:
                 self.notes.append(f"gcsd not runnable ({text}); its columns are n/a")
@@ -220,7 +243,7 @@ class Runner:
             path = self.router_path(name)
         except (TimeoutError, measure.RouterDied) as exc:
             r["error"] = str(exc)
-            self.notes.append(f"{name}: {exc}")
+            self.notes.append(_short(f"{name}: {exc}"))
             log(f"[{name}] FAILED: {exc}")
             return
         try:
@@ -236,7 +259,7 @@ class Runner:
                 r["latency"] = measure.measure_latency(path, LATENCY_RATE, a.latency_s)
         except (measure.RouterDied, TimeoutError) as exc:
             r["error"] = str(exc)
-            self.notes.append(f"{name}: {exc}")
+            self.notes.append(_short(f"{name}: {exc}"))
             log(f"[{name}] FAILED: {exc}")
         finally:
             r["stop"] = path.router.stop()
@@ -251,9 +274,10 @@ class Runner:
             f"{a.cpu_s:.0f} s CPU window")
         try:
             self.res.setdefault("gcsd", {})["vehicle"] = measure.measure_vehicle(
-                lambda: start_gcsd(self.workdir, cfg, prof), port, a.cpu_s, a.start_samples)
+                lambda: start_gcsd(self.workdir, cfg, prof, self.gcsd_env), port, a.cpu_s, a.start_samples,
+                idle_threshold_pct=a.idle_threshold, idle_wait_s=a.idle_wait)
         except RuntimeError as exc:
-            self.notes.append(f"gcsd vehicle: {exc}")
+            self.notes.append(_short(f"gcsd vehicle: {exc}"))
             log(f"[gcsd] vehicle FAILED: {exc}")
 
     def params(self) -> None:
@@ -382,7 +406,7 @@ def main(argv=None) -> int:
         runner.close()
     runner.res["elapsed_s"] = time.monotonic() - t0
     end_commit = _commit()
-    if end_commit != runner.res["machine"]["gcsd_commit"]:
+    if not args.gcsd_rev and end_commit != runner.res["machine"]["gcsd_commit"]:
         runner.notes.append(f"gcsd changed during the run: {runner.res['machine']['gcsd_commit']} at the start, "
                             f"{end_commit} at the end")
     print(runner.table())
