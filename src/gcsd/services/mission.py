@@ -203,11 +203,19 @@ class MissionService(Service):
 
     # --- timers ------------------------------------------------------------------------------
     def pending(self, channel, now: float, send) -> float | None:
-        """Called from the node's send pass: run the transfer timers; return the next deadline."""
+        """Called from the node's send pass: run the transfer timers; return the next deadline.
+
+        A tick that queued a STATUSTEXT or changed the links' slowdown asks for another pass at
+        once (`now`): the text queue and the stream schedule were already run in this one.
+        """
+        again = False
         for t in self.transfers.values():
             out = t.tick(now)
             if out:
                 self._run(out)
+                again = True
+        if again:
+            return now
         deadlines = [d for t in self.transfers.values() if (d := t.next_deadline()) is not None]
         return min(deadlines) if deadlines else None
 

@@ -1,0 +1,274 @@
+"""Missions, fence and rally through the real daemon: pymavlink ground stations on loopback UDP.
+
+Round trips of each plan type, the plans surviving a restart, a bad plan file kept aside, the
+timers (re-requests every second, the 8 s abort, streams slowed while items are requested),
+ownership between two ground stations, MAVLink1 and legacy messages, the current item, and a
+500-item mission through a proxy that loses 20 % of the datagrams in each direction.
+"""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from gcsd.mission import MissionItem
+
+from .helpers import VEHICLE, is_ack, is_type, pump, udp_channel, udp_url, wait_for
+from .mission_client import LossyProxy, MissionClient
+
+HOME_ITEM = MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 1, 1, 0, 0, 0, 0, -353632620, 1491652370, 584.0)
+LAT, LON = -353630000, 1491650000
+REL = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+ACCEPTED = M.MAV_MISSION_ACCEPTED
+
+
+def waypoint(i: int, alt: float = 30.0) -> MissionItem:
+    return MissionItem(M.MAV_CMD_NAV_WAYPOINT, REL, 0, 1, 0.0, 2.0, 0.0, 0.0, LAT + 1000 * i, LON + 700 * i, alt)
+
+
+MISSION_PLAN = [
+    HOME_ITEM,
+    MissionItem(M.MAV_CMD_NAV_TAKEOFF, REL, 0, 1, 0, 0, 0, 0, 0, 0, 20.0),
+    waypoint(1), waypoint(2, 45.5),
+    MissionItem(M.MAV_CMD_DO_JUMP, M.MAV_FRAME_MISSION, 0, 1, 2.0, 3.0, 0, 0, 0, 0, 0.0),
+    MissionItem(M.MAV_CMD_NAV_RETURN_TO_LAUNCH, M.MAV_FRAME_MISSION, 0, 1, 0, 0, 0, 0, 0, 0, 0.0),
+]
+INC = M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+FENCE_PLAN = [
+    MissionItem(M.MAV_CMD_NAV_FENCE_RETURN_POINT, M.MAV_FRAME_GLOBAL_INT, 0, 1, 0, 0, 0, 0, LAT, LON, 0.0),
+    *[MissionItem(INC, M.MAV_FRAME_GLOBAL_INT, 0, 1, 4.0, 0, 0, 0, LAT + dx, LON + dy, 0.0)
+      for dx, dy in ((-5000, -5000), (-5000, 5000), (5000, 5000), (5000, -5000))],
+    MissionItem(M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION, M.MAV_FRAME_GLOBAL_INT, 0, 1, 25.0, 0, 0, 0, LAT, LON + 100, 0.0),
+]
+RALLY_PLAN = [MissionItem(M.MAV_CMD_NAV_RALLY_POINT, REL, 0, 1, 0, 0, 0, 0, LAT + 300 * i, LON - 200 * i, 40.0 + i)
+              for i in range(3)]
+PLANS = {M.MAV_MISSION_TYPE_MISSION: MISSION_PLAN, M.MAV_MISSION_TYPE_FENCE: FENCE_PLAN,
+         M.MAV_MISSION_TYPE_RALLY: RALLY_PLAN}
+TYPES = [pytest.param(t, id=n) for t, n in ((0, "mission"), (1, "fence"), (2, "rally"))]
+
+
+def config(**mission) -> dict:
+    conf = {"channels": [udp_channel("gcs")]}
+    if mission:
+        conf["mission"] = mission
+    return conf
+
+
+@pytest.fixture
+def gcs(daemon, client):
+    """A running daemon and a ground station (255, 190) that has said hello."""
+    d = daemon(config())
+    c = client(udp_url(d.port("gcs")))
+    c.heartbeat()
+    return d, c
+
+
+def home_only() -> list[MissionItem]:
+    return [MissionItem(HOME_ITEM.command, HOME_ITEM.frame, 0, 1, 0, 0, 0, 0, HOME_ITEM.x, HOME_ITEM.y, HOME_ITEM.z)]
+
+
+@pytest.mark.parametrize("mission_type", TYPES)
+def test_a_ground_station_uploads_downloads_and_clears_each_plan(gcs, mission_type):
+    _, c = gcs
+    mc = MissionClient(c)
+    plan = PLANS[mission_type]
+    assert mc.upload(plan, mission_type) == ACCEPTED
+    assert mc.download(mission_type) == plan
+    assert mc.clear(mission_type) == ACCEPTED
+    assert mc.download(mission_type) == []
+
+
+def test_a_fresh_vehicle_has_home_as_its_mission(gcs):
+    _, c = gcs
+    assert MissionClient(c).download(0) == home_only()
+
+
+def test_all_three_plans_survive_a_restart(daemon, client, tmp_path):
+    first = daemon(config())
+    c = client(udp_url(first.port("gcs")))
+    c.heartbeat()
+    mc = MissionClient(c)
+    for mission_type, plan in PLANS.items():
+        assert mc.upload(plan, mission_type) == ACCEPTED
+    first.stop()
+    state = tmp_path / "state"
+    assert {p.name for p in state.glob("*.waypoints")} == {"mission.waypoints", "fence.waypoints", "rally.waypoints"}
+
+    second = daemon(config())
+    c2 = client(udp_url(second.port("gcs")))
+    c2.heartbeat()
+    mc2 = MissionClient(c2)
+    for mission_type, plan in PLANS.items():
+        assert mc2.download(mission_type) == plan
+
+
+def test_a_bad_plan_file_is_reported_and_kept_aside_not_overwritten(daemon, client, tmp_path, capfd):
+    state = tmp_path / "state"
+    state.mkdir()
+    bad = "QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t-35.36\t149.16\n"
+    (state / "mission.waypoints").write_text(bad)
+    (state / "rally.waypoints").write_text("QGC WPL 110\n0\t0\t3\t5100\t0\t0\t0\t0\t95.0\t149.0\t10\t1\n")
+    d = daemon(config())
+    c = client(udp_url(d.port("gcs")))
+    c.heartbeat()
+    mc = MissionClient(c)
+    assert mc.download(0) == home_only()
+    assert mc.download(2) == []
+    assert (state / "mission.waypoints.invalid").read_text() == bad
+    assert not (state / "mission.waypoints").exists()
+    out = capfd.readouterr().out
+    assert "mission_file_invalid" in out and "line 2: expected 12 values, got 10" in out
+    assert "item 0: MAV_MISSION_INVALID_PARAM5_X" in out
+    assert mc.upload(MISSION_PLAN, 0) == ACCEPTED  # and the next plan is saved normally
+    assert (state / "mission.waypoints.invalid").read_text() == bad
+
+
+def test_a_second_ground_station_is_denied_while_the_first_uploads(daemon, client):
+    d = daemon(config())
+    a, b = client(udp_url(d.port("gcs")), 255, 190), client(udp_url(d.port("gcs")), 254, 190)
+    a.heartbeat()
+    b.heartbeat()
+    mark_a = a.mark()
+    a.send(M.MAVLink_mission_count_message(*VEHICLE, len(RALLY_PLAN), 2))
+    assert wait_for(a, lambda r: r.type == "MISSION_REQUEST" and r.msg.seq == 0, since=mark_a)
+    for msg in (M.MAVLink_mission_count_message(*VEHICLE, 2, 2), M.MAVLink_mission_clear_all_message(*VEHICLE, 2),
+                M.MAVLink_mission_clear_all_message(*VEHICLE, M.MAV_MISSION_TYPE_ALL)):
+        mark_b = b.mark()
+        b.send(msg)
+        ack = wait_for(b, lambda r: r.type == "MISSION_ACK", since=mark_b)
+        assert ack is not None and ack.msg.type == M.MAV_MISSION_DENIED, msg
+        assert ack.msg.target_system == 254
+    assert MissionClient(a).upload(RALLY_PLAN, 2) == ACCEPTED  # a's upload was never disturbed
+
+
+def test_clear_all_types_at_once(gcs):
+    _, c = gcs
+    mc = MissionClient(c)
+    for mission_type, plan in PLANS.items():
+        mc.upload(plan, mission_type)
+    assert mc.clear(M.MAV_MISSION_TYPE_ALL) == ACCEPTED
+    assert [len(mc.download(t)) for t in (0, 1, 2)] == [0, 0, 0]
+
+
+def test_a_mission_transfers_over_mavlink1(daemon, client):
+    """MAVLink1 has no mission_type field: only missions can travel on it (fence and rally
+    uploads need MAVLink2, see the unit tests)."""
+    d = daemon(config())
+    c = client(udp_url(d.port("gcs")), version=1)
+    c.heartbeat()
+    mc = MissionClient(c)
+    assert mc.upload(MISSION_PLAN, 0) == ACCEPTED
+    assert mc.download(0) == MISSION_PLAN
+    assert all(r.raw[0] == 0xFE for r in c.since(0) if r.src == VEHICLE)
+
+
+def test_legacy_mission_item_and_mission_request_work_with_warnings(gcs):
+    _, c = gcs
+    mc = MissionClient(c)
+    mark = c.mark()
+    assert mc.upload(RALLY_PLAN, 2, use_int=False) == ACCEPTED
+    ts, tc = VEHICLE
+    c.send(M.MAVLink_mission_request_list_message(ts, tc, 2))
+    c.send(M.MAVLink_mission_request_message(ts, tc, 1, 2))
+    item = wait_for(c, is_type("MISSION_ITEM", VEHICLE), since=mark)
+    assert item is not None and item.msg.seq == 1
+    float32_deg = 1e-5  # MISSION_ITEM carries degrees as float32: about 4e-6 degree steps here
+    assert item.msg.x == pytest.approx(RALLY_PLAN[1].x / 1e7, abs=float32_deg)
+    assert item.msg.y == pytest.approx(RALLY_PLAN[1].y / 1e7, abs=float32_deg)
+    pump([c], 0.3)
+    texts = [r.msg.text for r in c.since(mark, "STATUSTEXT")]
+    assert "got MISSION_ITEM; GCS should send MISSION_ITEM_INT" in texts
+    assert "got MISSION_REQUEST; use MISSION_REQUEST_INT!" in texts
+    for got, sent in zip(mc.download(2), RALLY_PLAN, strict=True):  # degrees x 1e7, within float32's steps
+        assert abs(got.x - sent.x) <= 100 and abs(got.y - sent.y) <= 100
+        assert got == MissionItem(sent.command, sent.frame, sent.current, sent.autocontinue, sent.param1,
+                                  sent.param2, sent.param3, sent.param4, got.x, got.y, sent.z)
+
+
+def test_mission_current_follows_the_plan_and_set_current(gcs):
+    _, c = gcs
+    assert MissionClient(c).upload(MISSION_PLAN, 0) == ACCEPTED
+    mark = c.mark()
+    current = wait_for(c, is_type("MISSION_CURRENT", VEHICLE), timeout=3.0, since=mark)
+    assert current is not None
+    assert (current.msg.seq, current.msg.total, current.msg.mission_state) == (
+        0, len(MISSION_PLAN) - 1, M.MISSION_STATE_NOT_STARTED)
+
+    mark = c.mark()
+    c.send(M.MAVLink_mission_set_current_message(*VEHICLE, 3))
+    current = wait_for(c, lambda r: r.type == "MISSION_CURRENT" and r.msg.seq == 3, timeout=0.4, since=mark)
+    assert current is not None, "MISSION_SET_CURRENT is confirmed by MISSION_CURRENT at once"
+
+    mark = c.mark()
+    c.command_long(M.MAV_CMD_DO_SET_MISSION_CURRENT, len(MISSION_PLAN))
+    ack = wait_for(c, is_ack(M.MAV_CMD_DO_SET_MISSION_CURRENT), since=mark)
+    assert ack is not None and ack.msg.result == M.MAV_RESULT_DENIED
+    mark = c.mark()
+    c.command_long(M.MAV_CMD_DO_SET_MISSION_CURRENT, 2)
+    ack = wait_for(c, is_ack(M.MAV_CMD_DO_SET_MISSION_CURRENT), since=mark)
+    assert ack is not None and ack.msg.result == M.MAV_RESULT_ACCEPTED
+    assert wait_for(c, lambda r: r.type == "MISSION_CURRENT" and r.msg.seq == 2, timeout=0.4, since=mark)
+
+
+def test_mission_current_says_no_mission_with_home_alone(gcs):
+    _, c = gcs
+    current = wait_for(c, is_type("MISSION_CURRENT", VEHICLE), timeout=3.0)
+    assert current is not None
+    assert (current.msg.total, current.msg.mission_state) == (0, M.MISSION_STATE_NO_MISSION)
+
+
+def test_autopilot_version_advertises_mission_fence_and_rally(gcs):
+    _, c = gcs
+    mark = c.mark()
+    c.command_long(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+    version = wait_for(c, is_type("AUTOPILOT_VERSION", VEHICLE), since=mark)
+    assert version is not None
+    wanted = (M.MAV_PROTOCOL_CAPABILITY_MISSION_INT | M.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
+              | M.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE | M.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY)
+    assert version.msg.capabilities & wanted == wanted
+
+
+@pytest.mark.slow
+def test_a_stalled_upload_is_rerequested_every_second_with_slow_streams_then_cancelled_at_8_s(gcs):
+    _, c = gcs
+    pump([c], 2.0)
+    before = [r for r in c.received if r.type == "ATTITUDE" and r.t > time.monotonic() - 2.0]
+    mark = c.mark()
+    sent_at = time.monotonic()
+    c.send(M.MAVLink_mission_count_message(*VEHICLE, 3, 0))
+    ack = wait_for(c, is_type("MISSION_ACK", VEHICLE), timeout=10.0, since=mark)
+    assert ack is not None and ack.msg.type == M.MAV_MISSION_OPERATION_CANCELLED
+    assert ack.t - sent_at == pytest.approx(8.0, abs=0.5)
+    requests = [r for r in c.since(mark, "MISSION_REQUEST") if r.src == VEHICLE]
+    assert [r.msg.seq for r in requests] == [0] * len(requests)
+    gaps = [b.t - a.t for a, b in zip(requests, requests[1:])]
+    assert len(requests) in (8, 9) and all(0.8 < g < 1.3 for g in gaps), gaps
+    pump([c], 0.2)
+    assert "Mission upload timeout" in [r.msg.text for r in c.since(mark, "STATUSTEXT")]
+    during = [r for r in c.since(mark, "ATTITUDE") if sent_at + 1.0 < r.t < sent_at + 7.0]
+    rate_before, rate_during = len(before) / 2.0, len(during) / 6.0
+    assert rate_during < rate_before / 2.5, (rate_before, rate_during)
+
+
+@pytest.mark.slow
+def test_500_item_mission_round_trips_through_20_percent_loss_each_way(daemon, client):
+    d = daemon(config(retry_ms=100))
+    proxy = LossyProxy(d.port("gcs"), loss=0.2, seed=20261122)
+    try:
+        c = client(udp_url(proxy.port))
+        c.heartbeat()
+        mc = MissionClient(c, timeout_s=0.15, window=5, deadline_s=120.0)
+        plan = [HOME_ITEM] + [waypoint(i, 10.0 + i % 100) for i in range(1, 500)]
+        started = time.monotonic()
+        assert mc.upload(plan, 0) == ACCEPTED
+        uploaded = time.monotonic()
+        assert mc.download(0) == plan
+        done = time.monotonic()
+        print(f"500 items through 20 % loss each way: upload {uploaded - started:.1f} s, "
+              f"download {done - uploaded:.1f} s, client resends {mc.resent}, "
+              f"dropped {proxy.dropped}, forwarded {proxy.forwarded}")
+        assert proxy.dropped["up"] > 50 and proxy.dropped["down"] > 50
+    finally:
+        proxy.close()
