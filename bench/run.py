@@ -2,7 +2,7 @@
 
     python -m bench                      # everything (about 5 minutes on an idle machine)
     python -m bench --quick              # smoke run (about 1 minute)
-    python -m bench throughput latency   # just these; also: harness, vehicle, params
+    python -m bench throughput latency   # just these; also: harness, vehicle, params, mission
     python -m bench --routers mavproxy   # only one router (gcsd, mavproxy, or both: gcsd,mavproxy)
 
 Progress goes to stderr; the result table to stdout; ``--json FILE`` saves every figure and trial.
@@ -28,6 +28,7 @@ if __package__ in (None, ""):  # run as a script: python bench/run.py
     sys.path.insert(0, str(FsPath(__file__).resolve().parent.parent))
 
 from bench import measure  # noqa: E402
+from bench import mission as bench_mission  # noqa: E402
 from bench import params as bench_params  # noqa: E402
 from bench.measure import Path, SeqAllocator, log  # noqa: E402
 from bench.peers import start_receiver, start_sender  # noqa: E402
@@ -42,7 +43,7 @@ from bench.routers import (  # noqa: E402
     start_mavproxy,
 )
 
-WHAT = ("harness", "throughput", "latency", "vehicle", "params")
+WHAT = ("harness", "throughput", "latency", "vehicle", "params", "mission")
 LATENCY_RATE = 1000
 
 
@@ -205,13 +206,13 @@ class Runner:
     # ----------------------------------------------------------------------------- measurements
     def run(self) -> None:
         a = self.a
-        if "gcsd" in a.routers or a.what & {"vehicle", "params"}:
+        if "gcsd" in a.routers or a.what & {"vehicle", "params", "mission"}:
             ok, text = gcsd_available(self.gcsd_env)
             self.res["gcsd_version"] = text
             if not ok:
                 self.notes.append(f"gcsd not runnable ({text}); its columns are n/a")
                 a.routers = [r for r in a.routers if r != "gcsd"]
-                a.what -= {"vehicle", "params"}
+                a.what -= {"vehicle", "params", "mission"}
                 log(f"gcsd not runnable: {text}")
         if a.what & {"harness", "throughput", "latency"}:
             self.harness()
@@ -222,6 +223,8 @@ class Runner:
             self.vehicle()
         if "params" in a.what:
             self.params()
+        if "mission" in a.what:
+            self.mission()
 
     def harness(self) -> None:
         a = self.a
@@ -285,6 +288,12 @@ class Runner:
         self.res["params"] = bench_params.measure(self.workdir, reps=3 if self.a.quick else 10,
                                                   env=getattr(self, "gcsd_env", None))
         self.notes += [f"params: {e}" for e in (r.error for r in self.res["params"].values()) if e]
+
+    def mission(self) -> None:
+        """1 000-item mission upload and download by MAVSDK: gcsd against MAVSDK's mission_raw_server."""
+        self.res["mission"] = bench_mission.measure(self.workdir, reps=3 if self.a.quick else 10,
+                                                    env=getattr(self, "gcsd_env", None))
+        self.notes += [f"mission: {e}" for e in (r.error for r in self.res["mission"].values()) if e]
 
     # ----------------------------------------------------------------------------------- output
     def table(self) -> str:
@@ -391,6 +400,9 @@ class Runner:
         if self.res.get("params"):
             out += ["", "Parameters: full list by PARAM_REQUEST_LIST on loopback, gcsd against MAVSDK's "
                     "param_server (bench/params.py)", "", bench_params.table(self.res["params"])]
+        if self.res.get("mission"):
+            out += ["", "Missions: 1 000 items uploaded and downloaded by MAVSDK mission_raw, gcsd against MAVSDK's "
+                    "mission_raw_server (bench/mission.py)", "", bench_mission.table(self.res["mission"])]
         return "\n".join(out)
 
 
