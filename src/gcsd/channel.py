@@ -110,6 +110,9 @@ class Channel:
         self.signature_reject_reasons: dict[str, int] = {}
         self.tlog = None  # a TlogWriter shared by all channels, when log.tlog is set
         self._retired = ParseStats()  # counters of peers that are gone
+        # a high-latency link is silent until CONTROL_HIGH_LATENCY enables it (REFERENCE.md 11)
+        self.output_enabled = "high_latency" not in config.options
+        self.muted_frames = 0
 
     # --- peers -----------------------------------------------------------------------------
     def add_peer(self, key: object, write: PeerWriter) -> Peer:
@@ -175,6 +178,9 @@ class Channel:
         """Send raw bytes to every peer, if the budget allows; False (and a counted drop) if not."""
         if not self.peers:
             return True  # nobody to send to is not a failure of the link
+        if not self.output_enabled:
+            self.muted_frames += 1
+            return True  # discarded, as a disabled high-latency link discards everything
         if self.budget is not None and not self.budget.try_take(len(raw), self.clock()):
             self.stats.drops += 1
             return False

@@ -32,7 +32,7 @@ DEFAULT_STREAM_RATES_HZ = {"raw_sens": 2, "ext_stat": 2, "rc_chan": 5, "raw_ctrl
                            "extra1": 5, "extra2": 5, "extra3": 2, "params": 10, "adsb": 0}
 VEHICLE_TYPES = ("copter", "plane", "rover", "sub", "tracker", "blimp", "companion")
 CHANNEL_TYPES = ("udp-server", "udp-client", "tcp-server", "tcp-client", "serial")
-CHANNEL_OPTIONS = ("no_forward", "no_stream_override", "unsigned_ok", "forward_bad_crc")
+CHANNEL_OPTIONS = ("no_forward", "no_stream_override", "unsigned_ok", "forward_bad_crc", "high_latency")
 LOG_LEVELS = ("debug", "info", "warning", "error")
 LOG_FORMATS = ("console", "json")
 

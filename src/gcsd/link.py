@@ -4,6 +4,9 @@ Stream rates start from the channel's configuration (the SRn_ values). REQUEST_D
 changes a stream's rate on this link and re-buckets its messages; SET_MESSAGE_INTERVAL changes
 one message; interval 0 restores the default (the message's stream rate, 1000 ms for HEARTBEAT).
 RADIO_STATUS txbuf drives the slowdown as ArduPilot's handle_radio_status does.
+
+On a `high_latency` channel (REFERENCE.md section 11) the link sends HIGH_LATENCY2 every 5 s in
+place of the HEARTBEAT and no SRn_ streams; elsewhere HIGH_LATENCY2 is sent only when asked.
 """
 
 from __future__ import annotations
@@ -16,23 +19,30 @@ from .scheduler import SendScheduler
 from .streams import STREAM_MESSAGES, STREAM_OF_MESSAGE, rate_to_interval_ms
 
 HEARTBEAT_MS = 1000
+HIGH_LATENCY2_MS = 5000
 MAX_SLOWDOWN_MS = 2000
 
 
 class Link:
     def __init__(self, channel, now: float, producible: Callable[[int], bool], wake: Callable[[], None]) -> None:
         self.channel = channel
-        self.scheduler = SendScheduler(now, special_ids=(M.MAVLINK_MSG_ID_HEARTBEAT,))
+        self.high_latency = "high_latency" in channel.config.options
+        self.scheduler = SendScheduler(now, special_ids=(M.MAVLINK_MSG_ID_HEARTBEAT, M.MAVLINK_MSG_ID_HIGH_LATENCY2))
         self._producible = producible
         self._wake = wake
         self.stream_rates: dict[str, float] = dict(channel.config.streams)
         self._slow_reasons: set[str] = set()
-        self.scheduler.set_interval(M.MAVLINK_MSG_ID_HEARTBEAT, HEARTBEAT_MS, now)
+        if self.high_latency:
+            self.scheduler.set_interval(M.MAVLINK_MSG_ID_HIGH_LATENCY2, HIGH_LATENCY2_MS, now)
+        else:
+            self.scheduler.set_interval(M.MAVLINK_MSG_ID_HEARTBEAT, HEARTBEAT_MS, now)
         for stream, rate in self.stream_rates.items():
             self.set_stream_rate(stream, rate, now)
 
     def set_stream_rate(self, stream: str, rate_hz: float, now: float) -> None:
         self.stream_rates[stream] = rate_hz
+        if self.high_latency:
+            return  # no streams on a high-latency link
         interval = rate_to_interval_ms(rate_hz)
         for msgid in STREAM_MESSAGES[stream]:
             if self._producible(msgid):
@@ -40,7 +50,9 @@ class Link:
 
     def default_interval_ms(self, msgid: int) -> int:
         if msgid == M.MAVLINK_MSG_ID_HEARTBEAT:
-            return HEARTBEAT_MS
+            return 0 if self.high_latency else HEARTBEAT_MS
+        if msgid == M.MAVLINK_MSG_ID_HIGH_LATENCY2:
+            return HIGH_LATENCY2_MS if self.high_latency else 0
         stream = STREAM_OF_MESSAGE.get(msgid)
         return rate_to_interval_ms(self.stream_rates[stream]) if stream else 0
 

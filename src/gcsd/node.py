@@ -32,10 +32,11 @@ from .services.params import ParamService
 from .services.rates import RatesService
 from .services.statustext import StatusTextQueue
 from .services.timesync import TimesyncService
-from .sim import Simulation, VehicleState
+from .autopilot.attach import attach_services, initial_state
+from .autopilot.core import Autopilot
 from .streams import PARAM_SUFFIX, STREAM_NAMES
 from .telemetry import PRODUCERS
-from .vehicles import VehicleType
+from .vehicles import VehicleType, prearm_failures, vehicle_params
 
 log = structlog.get_logger("gcsd.node")
 
@@ -52,6 +53,7 @@ class VehicleNode:
         clock: Clock,
         channels: list[Channel],
         wake: Callable[[Channel], None],
+        backend=None,
     ) -> None:
         vcfg = config.vehicle
         self.index = index
@@ -63,7 +65,7 @@ class VehicleNode:
             base_params(
                 vcfg.sysid + index, config.gcs.sysid, config.gcs.enforce_sysid,
                 [dict(ch.config.streams) for ch in channels],
-            )
+            ) + list(vehicle_params(vehicle, vcfg.speedup))
         )
         self.param_service = ParamService(self, self.params, self.state_dir / "mav.parm" if self.state_dir else None)
         self.param_service.load(config.params_file)
@@ -72,13 +74,8 @@ class VehicleNode:
         self.compid = vcfg.compid
         self.min_interval_ms = max(1, 1250 // int(self.params.get("SCHED_LOOP_RATE")))
         now = clock.now()
-        home = vcfg.home
-        self.state = VehicleState(
-            lat=home.lat, lon=home.lon, alt_amsl_m=home.alt,
-            home_lat=home.lat, home_lon=home.lon, home_alt_m=home.alt, mode=vehicle.initial_mode,
-            capacity_mah=float(self.params.get("BATT_CAPACITY")),
-        )
-        self.sim = Simulation(self.state, now, vcfg.speedup)
+        self.state = initial_state(vehicle, vcfg.home, index, float(self.params.get("BATT_CAPACITY")))
+        self.sim = Autopilot(self, backend, now, vcfg.speedup)  # the vehicle: autopilot over a backend
         self.statustext = StatusTextQueue()
         self.handler_errors = 0
         self._wake = wake
@@ -96,6 +93,7 @@ class VehicleNode:
         self._build_dispatch()
         self.mission = MissionService(self, config.mission, self.state_dir)
         self.add_service(self.mission)
+        attach_services(self, config)
         try:
             self.param_service.save()  # the boot count
         except OSError as exc:
@@ -154,7 +152,7 @@ class VehicleNode:
         return sum(ch.stats.drops for ch in self.channels) & 0xFFFF
 
     def _producible(self, msgid: int) -> bool:
-        return msgid in PRODUCERS
+        return msgid in PRODUCERS and self.vehicle.produces(msgid)
 
     def link(self, channel: Channel) -> Link:
         return self.links[channel.index]
@@ -204,37 +202,8 @@ class VehicleNode:
             link.push(M.MAVLINK_MSG_ID_HEARTBEAT)
 
     def prearm_failures(self) -> list[str]:
-        """The pre-arm checks the core knows about, driven by parameters (ARMING_CHECK 0: none)."""
-        p = self.params.get
-        if p("ARMING_CHECK") == 0:
-            return []
-        s = self.state
-        failures = []
-        if not 1000 <= p("ANGLE_MAX") <= 8000:
-            failures.append("Check ANGLE_MAX")
-        if s.gps_fix_type < 3:
-            failures.append("GPS: no 3D fix")
-        elif s.hdop * 100 > p("GPS_HDOP_GOOD"):
-            failures.append(f"GPS: HDOP {s.hdop:.2f} too high")
-        if p("BATT_ARM_VOLT") > 0 and s.battery_voltage_v < p("BATT_ARM_VOLT"):
-            failures.append(f"Battery below minimum arming voltage ({s.battery_voltage_v:.1f}V)")
-        if p("BATT_ARM_MAH") > 0 and s.capacity_mah - s.consumed_mah < p("BATT_ARM_MAH"):
-            failures.append("Battery below minimum arming capacity")
-        if s.battery_remaining_pct < 10:
-            failures.append(f"Battery below minimum ({s.battery_remaining_pct}%)")
-        for n in range(1, 5):
-            lo, hi, trim = p(f"RC{n}_MIN"), p(f"RC{n}_MAX"), p(f"RC{n}_TRIM")
-            if lo > 1300:
-                failures.append(f"RC{n}_MIN too high")
-            elif hi < 1700:
-                failures.append(f"RC{n}_MAX too low")
-            elif not lo <= trim <= hi:
-                failures.append(f"RC{n}_TRIM out of range")
-        if p("COMPASS_USE"):
-            worst = max(abs(p("COMPASS_OFS_X")), abs(p("COMPASS_OFS_Y")), abs(p("COMPASS_OFS_Z")))
-            if worst > p("COMPASS_OFFS_MAX"):
-                failures.append("Compass offsets too high")
-        return failures
+        """The vehicle type's pre-arm checks (gcsd.vehicles.prearm; ARMING_CHECK 0: none)."""
+        return prearm_failures(self)
 
     def send_pass(self, channel: Channel, now: float) -> float | None:
         """Run this node's scheduler and text queue on one channel; returns the next deadline."""

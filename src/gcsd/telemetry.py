@@ -264,3 +264,7 @@ PRODUCERS: dict[int, Producer] = {
     M.MAVLINK_MSG_ID_AUTOPILOT_VERSION: autopilot_version,
     M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: extended_sys_state,
 }
+
+from .vehicle_telemetry import VEHICLE_PRODUCERS  # noqa: E402  (HIGH_LATENCY2, targets, fence)
+
+PRODUCERS.update(VEHICLE_PRODUCERS)

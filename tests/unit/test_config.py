@@ -283,7 +283,7 @@ BAD_CONFIGS = [
      "gcsd.yaml:2: channels[0].streams.extra1: expected a number 0..50, got -1"),
     ("channels:\n  - {name: fc, type: serial, device: /dev/ttyS0, options: [no_fwd]}\n",
      "gcsd.yaml:2: channels[0].options[0]: expected "
-     "no_forward|no_stream_override|unsigned_ok|forward_bad_crc, "
+     "no_forward|no_stream_override|unsigned_ok|forward_bad_crc|high_latency, "
      "got 'no_fwd'; did you mean 'no_forward'?"),
     ("channels:\n  - {name: fc, type: serial, device: /dev/ttyS0, options: no_forward}\n",
      "gcsd.yaml:2: channels[0].options: expected a list, got 'no_forward'"),

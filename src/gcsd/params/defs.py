@@ -3,8 +3,9 @@
 - SYSID_THISMAV (at the next start), SYSID_MYGCS and SYSID_ENFORCE (at once): who we are and
   which ground station may command us.
 - SRn_* for each channel n: the ten stream rates, applied at once.
-- ARMING_CHECK, ANGLE_MAX, GPS_HDOP_GOOD, BATT_ARM_VOLT, BATT_ARM_MAH, RCn_*, COMPASS_*:
-  the pre-arm checks (PreArm: ... on failure).
+- ARMING_CHECK, GPS_HDOP_GOOD, BATT_ARM_VOLT, BATT_ARM_MAH, RCn_*, COMPASS_*:
+  the pre-arm checks (PreArm: ... on failure). Vehicle parameters (ANGLE_MAX, WPNAV_*, FENCE_*,
+  ...) are defined by each vehicle type (gcsd.vehicles).
 - BATT_CAPACITY: the simulated battery. RCn_*: RC_CHANNELS values at rest. SERVOn_*: the
   scaling of SERVO_OUTPUT_RAW.
 - SCHED_LOOP_RATE: the fastest message interval accepted (0.8 x the loop rate), next start.
@@ -67,7 +68,6 @@ def servo_params() -> list[ParamDef]:
 def common_params() -> list[ParamDef]:
     return [
         P("ARMING_CHECK", INT32, 1, 0, 2**20, "", "Pre-arm checks to run: 0 none, 1 all, else a bitmask"),
-        P("ANGLE_MAX", INT16, 3000, 1000, 8000, "cdeg", "Maximum lean angle"),
         P("GPS_HDOP_GOOD", INT16, 140, 100, 900, "", "HDOP below which the GPS is good enough to arm"),
         P("BATT_CAPACITY", INT32, 5000, 0, 1_000_000, "mAh", "Battery capacity"),
         P("BATT_ARM_VOLT", REAL32, 0.0, 0.0, 100.0, "V", "Minimum battery voltage to arm (0 off)"),

@@ -56,6 +56,8 @@ class ControlService(Service):
         state = node.state
         if state.armed:
             return _ACCEPTED
+        if not node.vehicle.can_arm:
+            return _UNSUPPORTED  # a companion computer: arming is the flight controller's business
         if not forced:
             failures = node.prearm_failures()
             if failures:
@@ -88,10 +90,18 @@ class ControlService(Service):
             return _UNSUPPORTED
         return _ACCEPTED if self._set_mode(int(req.param2)) else _FAILED
 
+    def set_mode(self, number: int) -> bool:
+        """Change mode as a ground station asked: False (with a STATUSTEXT) if refused."""
+        return self._set_mode(number)
+
     def _set_mode(self, number: int) -> bool:
         node = self.node
         if number not in node.vehicle.modes:
             node.send_text(M.MAV_SEVERITY_WARNING, f"Mode change to {number} failed: unknown mode")
+            return False
+        refusal = node.sim.refuse_mode(number)  # the vehicle's own conditions (position, a mission...)
+        if refusal is not None:
+            node.send_text(M.MAV_SEVERITY_WARNING, f"Mode change to {node.vehicle.mode_name(number)} failed: {refusal}")
             return False
         if node.state.mode != number:
             node.state.mode = number

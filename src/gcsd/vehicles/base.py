@@ -1,7 +1,17 @@
-"""What a vehicle type supplies: MAV_TYPE, ArduPilot's mode numbers, capabilities, hooks.
+"""What a vehicle type supplies: data plus a few functions of the vehicle state.
 
-A VehicleType is data plus a few functions of the vehicle state. The services ask it, never
-`if copter:`. Mode tables come from pymavlink's mode maps (the numbers ArduPilot uses).
+A VehicleType is MAV_TYPE, ArduPilot's mode numbers and names (from pymavlink's mode maps),
+what each mode does (a `Behaviour`), the dynamics the simulation uses, its own parameters
+(with `settings(get)` turning them into SI `Settings`), its pre-arm checks, its command
+differences (extra COMMAND_LONG/INT handlers), the messages it does not produce, and
+ArduPilot's default stream rates for it. The services and the autopilot ask it, never
+`if copter:`.
+
+Stream rates: `ardupilot_stream_rates` records ArduPilot's per-vehicle SRn_/MAVn_ defaults
+(REFERENCE.md section 1) for reference and for configurations that want them; gcsd's own
+default is SPEC.md's YAML contract (the same streams for every vehicle type, so a ground
+station that never sends REQUEST_DATA_STREAM still sees telemetry). Decision recorded in
+docs/vehicles.md.
 """
 
 from __future__ import annotations
@@ -11,9 +21,27 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from ..autopilot.settings import Behaviour, Settings
+from ..params.store import ParamDef
 from ..sim import VehicleState
 
 M = mavlink
+STREAM_ORDER = ("raw_sens", "ext_stat", "rc_chan", "raw_ctrl", "position", "extra1", "extra2", "extra3",
+                "params", "adsb")
+
+
+def stream_rates(*rates: int) -> dict[str, int]:
+    """ArduPilot's order: RAW_SENS, EXT_STAT, RC_CHAN, RAW_CTRL, POSITION, EXTRA1..3, PARAMS, ADSB."""
+    return dict(zip(STREAM_ORDER, rates, strict=True))
+
+
+def modes_named(modes: dict[int, str], **behaviours: Behaviour) -> dict[int, Behaviour]:
+    """Mode number -> behaviour, from mode names; every mode gets one (HOLD unless named)."""
+    by_name = {name: number for number, name in modes.items()}
+    unknown = set(behaviours) - set(by_name)
+    if unknown:
+        raise ValueError(f"modes not in the mode map: {sorted(unknown)}")
+    return {number: behaviours.get(name, Behaviour.HOLD) for number, name in modes.items()}
 
 
 @dataclass(frozen=True)
@@ -28,6 +56,14 @@ class VehicleType:
     armable_modes: frozenset[int] | None = None  # None: any mode
     # extra COMMAND_LONG/INT handlers: command id -> handler(node, request) -> MAV_RESULT
     commands: dict[int, Callable] = field(default_factory=dict)
+    behaviours: dict[int, Behaviour] = field(default_factory=dict)
+    dynamics: Callable[[], object] | None = None  # None: nothing moves (a companion computer)
+    params: tuple[ParamDef, ...] = ()
+    settings: Callable[[Callable[[str], float]], Settings] = lambda get: Settings()
+    prearm_checks: tuple[Callable, ...] = ()
+    not_produced: frozenset[int] = frozenset()  # message ids this vehicle never sends
+    ardupilot_stream_rates: dict[str, int] = field(default_factory=dict)
+    can_arm: bool = True  # a companion computer has nothing to arm
 
     def base_mode(self, state: VehicleState) -> int:
         base = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
@@ -41,6 +77,8 @@ class VehicleType:
         return base
 
     def system_status(self, state: VehicleState) -> int:
+        if state.failsafe is not None and state.armed:
+            return M.MAV_STATE_CRITICAL
         return M.MAV_STATE_ACTIVE if state.armed else M.MAV_STATE_STANDBY
 
     def mode_number(self, name: str) -> int | None:
@@ -49,5 +87,14 @@ class VehicleType:
                 return number
         return None
 
+    def mode_name(self, number: int) -> str:
+        return self.modes.get(number, f"Mode({number})")
+
     def can_arm_in(self, mode: int) -> bool:
         return self.armable_modes is None or mode in self.armable_modes
+
+    def behaviour(self, mode: int) -> Behaviour:
+        return self.behaviours.get(mode, Behaviour.HOLD)
+
+    def produces(self, msgid: int) -> bool:
+        return msgid not in self.not_produced

@@ -1,0 +1,100 @@
+"""Failsafes: GCS heartbeat loss, low and critical battery, fence breach. Pure decisions.
+
+`Failsafes.check(...)` looks at the state once per autopilot tick and returns `Event`s (a
+STATUSTEXT and an optional action: a mode name, or DISARM). Each failsafe fires once when its
+condition starts and is reported cleared when it ends, as ArduPilot's do:
+
+- GCS: armed, the ground station (SYSID_MYGCS) has been heard at least once, and nothing for
+  `gcs_timeout_s` of real time (the link runs in real time whatever the speedup). On the
+  ground the action is DISARM. Cleared when its heartbeat returns.
+- Battery: voltage below BATT_LOW_VOLT / BATT_CRT_VOLT or remaining below BATT_LOW_MAH /
+  BATT_CRT_MAH (0 disables each), while armed; critical supersedes low; never cleared until
+  disarmed (a battery does not recover).
+- Fence: armed, enabled, outside (gcsd.autopilot.fence); breach count and time kept for
+  FENCE_STATUS in the state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from . import fence
+from .settings import DISARM, Settings
+
+
+@dataclass(frozen=True)
+class Event:
+    severity: int
+    text: str
+    action: str | None = None
+
+
+class Failsafes:
+    def __init__(self) -> None:
+        self.gcs_lost = False
+        self.battery_level = 0  # 0 ok, 1 low, 2 critical
+        self.fence_breached: set[int] = set()
+
+    def check(self, s, settings: Settings, params, gcs_last_seen_s: float | None, now: float,
+              fence_items, sim_time_ms: int) -> list[Event]:
+        events: list[Event] = []
+        if not s.armed:
+            self.battery_level = 0
+            self.fence_breached = set()
+        events += self._gcs(s, settings, gcs_last_seen_s, now)
+        if s.armed:
+            events += self._battery(s, settings, params)
+            if "FENCE_ENABLE" in params:
+                events += self._fence(s, settings, params, fence_items, sim_time_ms)
+        s.failsafe = "GCS" if self.gcs_lost else ("Battery" if self.battery_level else (
+            "Fence" if self.fence_breached else None))
+        return events
+
+    def _gcs(self, s, settings: Settings, last_seen: float | None, now: float) -> list[Event]:
+        if last_seen is None or settings.gcs_failsafe is None:
+            self.gcs_lost = False
+            return []
+        lost = now - last_seen > settings.gcs_timeout_s
+        if lost and not self.gcs_lost and s.armed:
+            self.gcs_lost = True
+            action = DISARM if s.on_ground else settings.gcs_failsafe
+            return [Event(M.MAV_SEVERITY_CRITICAL, "GCS Failsafe", action)]
+        if not lost and self.gcs_lost:
+            self.gcs_lost = False
+            return [Event(M.MAV_SEVERITY_INFO, "GCS Failsafe Cleared")]
+        return []
+
+    def _battery(self, s, settings: Settings, params) -> list[Event]:
+        if "BATT_LOW_VOLT" not in params:
+            return []
+        get = params.get
+        volts, left = s.battery_voltage_v, s.capacity_mah - s.consumed_mah
+        critical = (0 < get("BATT_CRT_VOLT") and volts < get("BATT_CRT_VOLT")) or \
+            (0 < get("BATT_CRT_MAH") and left < get("BATT_CRT_MAH"))
+        low = (0 < get("BATT_LOW_VOLT") and volts < get("BATT_LOW_VOLT")) or \
+            (0 < get("BATT_LOW_MAH") and left < get("BATT_LOW_MAH"))
+        level = 2 if critical else (1 if low else 0)
+        if level <= self.battery_level:
+            return []
+        self.battery_level = level
+        word = "critical" if level == 2 else "low"
+        action = settings.battery_critical if level == 2 else settings.battery_low
+        text = f"Battery 1 is {word} {volts:.2f}V used {s.consumed_mah:.0f} mAh"
+        return [Event(M.MAV_SEVERITY_CRITICAL, text, action)]
+
+    def _fence(self, s, settings: Settings, params, items, sim_time_ms: int) -> list[Event]:
+        cfg = fence.FenceConfig.from_params(params.get)
+        if not cfg.enabled:
+            self.fence_breached = set()
+            return []
+        now_breached = fence.breaches(s, cfg, items)
+        new = now_breached - self.fence_breached
+        self.fence_breached = now_breached
+        s.fence_breach_type = fence.breach_code(now_breached)
+        if not new:
+            return []
+        s.fence_breach_count = (s.fence_breach_count + 1) & 0xFFFF
+        s.fence_breach_time_ms = sim_time_ms
+        return [Event(M.MAV_SEVERITY_CRITICAL, f"Fence Breach: {fence.describe(new)}", settings.fence_action)]

@@ -1,0 +1,237 @@
+"""Flying commands and guided-mode messages: the thin layer between MAVLink and the autopilot.
+
+Commands (REFERENCE.md section 10; COMMAND_LONG and COMMAND_INT alike): NAV_RETURN_TO_LAUNCH,
+NAV_LAND, NAV_LOITER_UNLIM (switch to RTL, LAND, LOITER: UNSUPPORTED for a vehicle without
+that mode), MISSION_START (param1 first item), DO_REPOSITION (COMMAND_INT: a guided target;
+param2 bit 0 switches to GUIDED first, else DENIED outside guided), DO_CHANGE_SPEED (param2
+m/s), DO_CHANGE_ALTITUDE, DO_SET_HOME (param1 1: here), DO_SET_ROI / DO_SET_ROI_LOCATION /
+DO_SET_ROI_NONE, CONDITION_YAW, DO_PAUSE_CONTINUE, DO_SET_SERVO, DO_REPEAT_SERVO,
+DO_SET_RELAY, DO_REPEAT_RELAY, DO_FENCE_ENABLE, DO_FLIGHTTERMINATION. The vehicle type adds
+its own (takeoff, motor test...). A command the autopilot cannot do now gets FAILED.
+
+Messages: SET_POSITION_TARGET_GLOBAL_INT and SET_POSITION_TARGET_LOCAL_NED (positions or
+velocities by type_mask, in GUIDED only); RC_CHANNELS_OVERRIDE and MANUAL_CONTROL only from
+the GCS sysid (SYSID_MYGCS), as ArduPilot; GLOBAL_POSITION_INT from other systems feeds an
+antenna tracker's target.
+"""
+
+from __future__ import annotations
+
+import math
+
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from ..autopilot.settings import Behaviour
+from ..sim.geo import offset
+from . import Incoming, Service
+from .commands import CommandRequest
+
+ACCEPTED, DENIED, FAILED, UNSUPPORTED = (
+    M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_DENIED, M.MAV_RESULT_FAILED, M.MAV_RESULT_UNSUPPORTED)
+RELATIVE_FRAMES = frozenset({
+    M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_FRAME_GLOBAL_TERRAIN_ALT,
+    M.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
+})
+POSITION_IGNORED = 0b111
+VELOCITY_IGNORED = 0b111000
+YAW_IGNORED = 1024
+RC_IGNORE = 65535
+
+
+def _result(ok: bool) -> int:
+    return ACCEPTED if ok else FAILED
+
+
+class FlightService(Service):
+    def __init__(self, node) -> None:
+        self.node = node
+        self.ap = node.sim
+        node.mission.guided_handler = self.ap.guided_mission_item
+
+    def message_handlers(self):
+        handlers = super().message_handlers()
+        if Behaviour.TRACK not in set(self.node.vehicle.behaviours.values()):
+            handlers.pop("GLOBAL_POSITION_INT", None)  # only an antenna tracker follows other vehicles
+        return handlers
+
+    def commands(self):
+        table = {
+            M.MAV_CMD_NAV_RETURN_TO_LAUNCH: self.rtl, M.MAV_CMD_NAV_LAND: self.land,
+            M.MAV_CMD_NAV_LOITER_UNLIM: self.loiter, M.MAV_CMD_MISSION_START: self.mission_start,
+            M.MAV_CMD_DO_REPOSITION: self.reposition, M.MAV_CMD_DO_CHANGE_SPEED: self.change_speed,
+            M.MAV_CMD_DO_CHANGE_ALTITUDE: self.change_altitude, M.MAV_CMD_DO_SET_HOME: self.set_home,
+            M.MAV_CMD_DO_SET_ROI: self.set_roi, M.MAV_CMD_DO_SET_ROI_LOCATION: self.set_roi,
+            M.MAV_CMD_DO_SET_ROI_NONE: self.roi_none, M.MAV_CMD_CONDITION_YAW: self.condition_yaw,
+            M.MAV_CMD_DO_PAUSE_CONTINUE: self.pause_continue, M.MAV_CMD_DO_SET_SERVO: self.set_servo,
+            M.MAV_CMD_DO_REPEAT_SERVO: self.repeat_servo, M.MAV_CMD_DO_SET_RELAY: self.set_relay,
+            M.MAV_CMD_DO_REPEAT_RELAY: self.repeat_relay, M.MAV_CMD_DO_FLIGHTTERMINATION: self.terminate,
+        }
+        if "FENCE_ENABLE" in self.node.params:
+            table[M.MAV_CMD_DO_FENCE_ENABLE] = self.fence_enable
+        return table
+
+    # --- modes by command ------------------------------------------------------------------
+    def _mode(self, name: str) -> int:
+        number = self.node.vehicle.mode_number(name)
+        if number is None:
+            return UNSUPPORTED
+        return _result(self.node.control.set_mode(number))
+
+    def rtl(self, req: CommandRequest) -> int:
+        return self._mode("RTL")
+
+    def land(self, req: CommandRequest) -> int:
+        return self._mode("LAND")
+
+    def loiter(self, req: CommandRequest) -> int:
+        return self._mode("LOITER")
+
+    def mission_start(self, req: CommandRequest) -> int:
+        return _result(self.ap.start_mission(int(req.param1) if math.isfinite(req.param1) else 0))
+
+    # --- guided ----------------------------------------------------------------------------
+    def _alt(self, z: float, frame: int) -> float:
+        s = self.node.state
+        return s.home_alt_m + z if frame in RELATIVE_FRAMES else z
+
+    def reposition(self, req: CommandRequest) -> int:
+        if not self.ap.in_guided():
+            if not int(req.param2) & M.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE:
+                return DENIED
+            number = self.node.vehicle.mode_number("GUIDED")
+            if number is None or not self.node.control.set_mode(number):
+                return FAILED
+            self.ap._enter(self.node.state.mode)
+        s = self.node.state
+        lat, lon = (req.x / 1e7, req.y / 1e7) if (req.x or req.y) else (s.lat, s.lon)
+        alt = self._alt(req.z, req.frame) if math.isfinite(req.z) else s.alt_amsl_m
+        speed = req.param1 if req.param1 > 0 else None
+        return _result(self.ap.goto(lat, lon, alt, speed))
+
+    def change_speed(self, req: CommandRequest) -> int:
+        return _result(self.ap.change_speed(req.param2))
+
+    def change_altitude(self, req: CommandRequest) -> int:
+        frame = int(req.param2) if req.param2 else M.MAV_FRAME_GLOBAL_RELATIVE_ALT
+        return _result(self.ap.change_altitude(self._alt(req.param1, frame)))
+
+    def set_home(self, req: CommandRequest) -> int:
+        s = self.node.state
+        if req.param1 >= 1:
+            return _result(self.ap.set_home(s.lat, s.lon, s.alt_amsl_m))
+        if not (req.x or req.y):
+            return FAILED
+        return _result(self.ap.set_home(req.x / 1e7, req.y / 1e7, self._alt(req.z, req.frame)))
+
+    def set_roi(self, req: CommandRequest) -> int:
+        if not (req.x or req.y):
+            return _result(self.ap.set_roi(None))
+        return _result(self.ap.set_roi((req.x / 1e7, req.y / 1e7, self._alt(req.z, req.frame))))
+
+    def roi_none(self, req: CommandRequest) -> int:
+        return _result(self.ap.set_roi(None))
+
+    def condition_yaw(self, req: CommandRequest) -> int:
+        if not self.ap.in_guided() and self.ap.behaviour != Behaviour.AUTO:
+            return FAILED
+        self.ap.condition_yaw(req.param1, req.param2, req.param3, req.param4)
+        return ACCEPTED
+
+    def pause_continue(self, req: CommandRequest) -> int:
+        return _result(self.ap.pause(req.param1 == 0))
+
+    # --- outputs ---------------------------------------------------------------------------
+    def set_servo(self, req: CommandRequest) -> int:
+        return _result(self.ap.outputs.set_servo(int(req.param1), int(req.param2)))
+
+    def repeat_servo(self, req: CommandRequest) -> int:
+        return _result(self.ap.outputs.repeat_servo(int(req.param1), int(req.param2), int(req.param3), req.param4))
+
+    def set_relay(self, req: CommandRequest) -> int:
+        return _result(self.ap.outputs.set_relay(int(req.param1), req.param2 >= 1))
+
+    def repeat_relay(self, req: CommandRequest) -> int:
+        return _result(self.ap.outputs.repeat_relay(int(req.param1), int(req.param2), req.param3))
+
+    def fence_enable(self, req: CommandRequest) -> int:
+        if req.param1 not in (0, 1, 2):
+            return FAILED
+        self.node.params.set("FENCE_ENABLE", 1 if req.param1 == 1 else 0, force=True)
+        return ACCEPTED
+
+    def terminate(self, req: CommandRequest) -> int:
+        if req.param1 > 0.5:
+            self.ap.disarm("flight termination")
+        return ACCEPTED
+
+    # --- messages --------------------------------------------------------------------------
+    def _for_us(self, inc: Incoming) -> bool:
+        return inc.msg.target_system == self.node.sysid
+
+    def handle_SET_POSITION_TARGET_GLOBAL_INT(self, inc: Incoming) -> None:
+        m = inc.msg
+        if not self._for_us(inc):
+            return
+        yaw = None if m.type_mask & YAW_IGNORED else math.degrees(m.yaw)
+        if not m.type_mask & POSITION_IGNORED == POSITION_IGNORED:
+            self.ap.goto(m.lat_int / 1e7, m.lon_int / 1e7, self._alt(m.alt, m.coordinate_frame), yaw_deg=yaw)
+        elif not m.type_mask & VELOCITY_IGNORED == VELOCITY_IGNORED:
+            self.ap.velocity(m.vx, m.vy, m.vz, yaw, inc.now)
+
+    def handle_SET_POSITION_TARGET_LOCAL_NED(self, inc: Incoming) -> None:
+        m = inc.msg
+        if not self._for_us(inc):
+            return
+        s = self.node.state
+        yaw = None if m.type_mask & YAW_IGNORED else math.degrees(m.yaw)
+        body = m.coordinate_frame in (M.MAV_FRAME_BODY_NED, M.MAV_FRAME_BODY_OFFSET_NED, M.MAV_FRAME_BODY_FRD)
+        c, sn = math.cos(s.yaw_rad), math.sin(s.yaw_rad)
+        rotate = (lambda x, y: (x * c - y * sn, x * sn + y * c)) if body else (lambda x, y: (x, y))
+        if not m.type_mask & POSITION_IGNORED == POSITION_IGNORED:
+            north, east = rotate(m.x, m.y)
+            if m.coordinate_frame == M.MAV_FRAME_LOCAL_NED:
+                lat, lon = offset(s.home_lat, s.home_lon, north, east)
+                alt = s.home_alt_m - m.z
+            else:  # offsets from where the vehicle is
+                lat, lon = offset(s.lat, s.lon, north, east)
+                alt = s.alt_amsl_m - m.z
+            self.ap.goto(lat, lon, alt, yaw_deg=yaw)
+        elif not m.type_mask & VELOCITY_IGNORED == VELOCITY_IGNORED:
+            vn, ve = rotate(m.vx, m.vy)
+            self.ap.velocity(vn, ve, m.vz, yaw, inc.now)
+
+    def _from_gcs(self, inc: Incoming) -> bool:
+        return inc.frame.sysid == self.node.gcs_sysid and inc.msg.target_system == self.node.sysid
+
+    def handle_RC_CHANNELS_OVERRIDE(self, inc: Incoming) -> None:
+        if not self._from_gcs(inc):
+            return
+        m = inc.msg
+        values = {}
+        for n in range(1, 19):
+            pwm = getattr(m, f"chan{n}_raw", RC_IGNORE)
+            if pwm == RC_IGNORE or (n > 8 and pwm in (0, RC_IGNORE)):
+                continue
+            values[n] = 0 if (n > 8 and pwm == RC_IGNORE - 1) else pwm
+        self.ap.rc_override(values, inc.now)
+
+    def handle_MANUAL_CONTROL(self, inc: Incoming) -> None:
+        if inc.frame.sysid != self.node.gcs_sysid or inc.msg.target != self.node.sysid:
+            return
+        m = inc.msg
+        get = self.node.params.get
+
+        def pwm(n: int, value: float) -> int:  # value in -1..1 around RCn_TRIM
+            trim = get(f"RC{n}_TRIM")
+            span = (get(f"RC{n}_MAX") - trim) if value >= 0 else (trim - get(f"RC{n}_MIN"))
+            return int(trim + max(-1.0, min(1.0, value)) * span)
+
+        throttle_min, throttle_max = get("RC3_MIN"), get("RC3_MAX")
+        values = {1: pwm(1, m.y / 1000.0), 2: pwm(2, -m.x / 1000.0),
+                  3: int(throttle_min + max(0, min(1000, m.z)) / 1000.0 * (throttle_max - throttle_min)),
+                  4: pwm(4, m.r / 1000.0)}
+        self.ap.rc_override(values, inc.now)
+
+    def handle_GLOBAL_POSITION_INT(self, inc: Incoming) -> None:
+        m = inc.msg
+        self.ap.observe_position(inc.frame.sysid, m.lat / 1e7, m.lon / 1e7, m.alt / 1000.0)

@@ -1,0 +1,124 @@
+"""Pre-arm checks as a table: each check is a function of the node returning failure texts.
+
+A vehicle type lists the checks it runs (`VehicleType.prearm_checks`); arming reports each
+failure as "PreArm: <text>" and is refused unless forced. ARMING_CHECK selects them as
+ArduPilot's bitmask does: 0 none, 1 all, else the bits below. The fence check runs whenever
+ARMING_CHECK is not 0 (ArduPilot does not let it be skipped either).
+
+| check | bit | fails when |
+|---|---|---|
+| angle_max | 32 (parameters) | ANGLE_MAX outside 1000..8000 cdeg (10..80 degrees) |
+| gps | 8 | no 3D fix, or HDOP above GPS_HDOP_GOOD / 100 |
+| battery | 256 | voltage below BATT_ARM_VOLT, remaining below BATT_ARM_MAH, below 10 %, or already low |
+| rc_calibration | 64 | RC1..4 MIN above 1300, MAX below 1700, TRIM outside MIN..MAX |
+| compass | 4 | an offset of COMPASS_OFS_X/Y/Z beyond COMPASS_OFFS_MAX (with COMPASS_USE) |
+| fence | always | fence enabled and the vehicle outside it, or FENCE_MARGIN >= FENCE_RADIUS |
+"""
+
+from __future__ import annotations
+
+from ..autopilot import fence as fence_check
+
+ALL = 1
+BIT_COMPASS = 4
+BIT_GPS = 8
+BIT_PARAMETERS = 32
+BIT_RC = 64
+BIT_BATTERY = 256
+LOW_BATTERY_PCT = 10
+
+
+def _enabled(node, bit: int) -> bool:
+    mask = int(node.params.get("ARMING_CHECK"))
+    return mask & ALL or mask & bit
+
+
+def angle_max(node) -> list[str]:
+    if not _enabled(node, BIT_PARAMETERS):
+        return []
+    return [] if 1000 <= node.params.get("ANGLE_MAX") <= 8000 else ["Check ANGLE_MAX"]
+
+
+def gps(node) -> list[str]:
+    if not _enabled(node, BIT_GPS):
+        return []
+    s = node.state
+    if s.gps_fix_type < 3:
+        return ["Need 3D Fix"]
+    limit = node.params.get("GPS_HDOP_GOOD") / 100.0
+    if s.hdop > limit:
+        return [f"High GPS HDOP ({s.hdop:.2f} > {limit:.2f})"]
+    return []
+
+
+def battery(node) -> list[str]:
+    if not _enabled(node, BIT_BATTERY):
+        return []
+    p, s = node.params.get, node.state
+    out = []
+    if p("BATT_ARM_VOLT") > 0 and s.battery_voltage_v < p("BATT_ARM_VOLT"):
+        out.append(f"Battery below minimum arming voltage ({s.battery_voltage_v:.1f}V)")
+    if p("BATT_ARM_MAH") > 0 and s.capacity_mah - s.consumed_mah < p("BATT_ARM_MAH"):
+        out.append("Battery below minimum arming capacity")
+    if s.battery_remaining_pct < LOW_BATTERY_PCT:
+        out.append(f"Battery below minimum ({s.battery_remaining_pct}%)")
+    if "BATT_LOW_VOLT" in node.params and 0 < p("BATT_LOW_VOLT") and s.battery_voltage_v < p("BATT_LOW_VOLT"):
+        out.append(f"Battery 1 low voltage failsafe ({s.battery_voltage_v:.1f}V)")
+    return out
+
+
+def rc_calibration(node) -> list[str]:
+    if not _enabled(node, BIT_RC):
+        return []
+    p = node.params.get
+    out = []
+    for n in range(1, 5):
+        lo, hi, trim = p(f"RC{n}_MIN"), p(f"RC{n}_MAX"), p(f"RC{n}_TRIM")
+        if lo > 1300:
+            out.append(f"RC{n}_MIN too high")
+        elif hi < 1700:
+            out.append(f"RC{n}_MAX too low")
+        elif not lo <= trim <= hi:
+            out.append(f"RC{n}_TRIM out of range")
+    return out
+
+
+def compass(node) -> list[str]:
+    if not _enabled(node, BIT_COMPASS):
+        return []
+    p = node.params.get
+    if not p("COMPASS_USE"):
+        return []
+    worst = max(abs(p("COMPASS_OFS_X")), abs(p("COMPASS_OFS_Y")), abs(p("COMPASS_OFS_Z")))
+    return ["Compass offsets too high"] if worst > p("COMPASS_OFFS_MAX") else []
+
+
+def fence(node) -> list[str]:
+    if "FENCE_ENABLE" not in node.params or not node.params.get("FENCE_ENABLE"):
+        return []
+    p = node.params.get
+    if p("FENCE_TYPE") & fence_check.CIRCLE and p("FENCE_MARGIN") >= p("FENCE_RADIUS"):
+        return ["Fence: FENCE_MARGIN is not less than FENCE_RADIUS"]
+    if node.state.gps_fix_type < 3:
+        return ["Fence requires position"]
+    breach = fence_check.breaches(node.state, fence_check.FenceConfig.from_params(p), node.mission.fence.stored(),
+                                  ignore_min_alt=True)
+    return [f"Fence: vehicle outside the {fence_check.describe(breach)}"] if breach else []
+
+
+FLYING_CHECKS = (gps, battery, rc_calibration, compass, fence)
+DRIVING_CHECKS = FLYING_CHECKS
+TRACKER_CHECKS = (gps, battery, compass)
+
+
+def prearm_failures(node) -> list[str]:
+    """Every failing check of the node's vehicle type (ARMING_CHECK 0: none)."""
+    if node.params.get("ARMING_CHECK") == 0:
+        return []
+    failures: list[str] = []
+    for check in node.vehicle.prearm_checks:
+        failures += check(node)
+    backend_checks = getattr(node.sim, "backend_prearm_failures", None)
+    if backend_checks is not None:
+        failures += backend_checks()
+    return failures

@@ -1,0 +1,83 @@
+"""ArduRover: MAV_TYPE_GROUND_ROVER, Rover's modes, a vehicle that drives and stops.
+
+Parameters: CRUISE_SPEED (m/s), CRUISE_THROTTLE (%), WP_SPEED (m/s, 0: CRUISE_SPEED),
+WP_RADIUS, LOIT_RADIUS (m), ATC_STR_RAT_MAX (deg/s), ATC_ACCEL_MAX (m/s/s), RTL_SPEED,
+MIS_DONE_BEHAVE (0 hold, 1 loiter, 2 acro, 3 manual), FS_GCS_ENABLE, FS_TIMEOUT, plus the
+shared groups. Command: DO_SET_REVERSE (drive backwards).
+"""
+
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from ..autopilot.settings import DISARM, Behaviour as B, Settings
+from ..params.store import INT8, REAL32, ParamDef as P
+from ..sim import GroundDynamics, Limits
+from . import commands, common, prearm
+from .base import VehicleType, modes_named, stream_rates
+
+_modes = dict(mavutil.mode_mapping_rover)
+_by_name = {v: k for k, v in _modes.items()}
+
+PARAMS = (
+    P("CRUISE_SPEED", REAL32, 2.0, 0.0, 100.0, "m/s", "Cruise speed"),
+    P("CRUISE_THROTTLE", INT8, 50, 0, 100, "%", "Throttle at cruise speed"),
+    P("WP_SPEED", REAL32, 0.0, 0.0, 100.0, "m/s", "Speed to waypoints (0: CRUISE_SPEED)"),
+    P("WP_RADIUS", REAL32, 2.0, 0.0, 100.0, "m", "A waypoint is reached within this distance"),
+    P("LOIT_RADIUS", REAL32, 2.0, 0.5, 100.0, "m", "LOITER and HOLD drift tolerance"),
+    P("ATC_STR_RAT_MAX", REAL32, 120.0, 0.0, 1000.0, "deg/s", "Maximum turn rate"),
+    P("ATC_ACCEL_MAX", REAL32, 1.0, 0.0, 10.0, "m/s/s", "Maximum acceleration"),
+    P("RTL_SPEED", REAL32, 0.0, 0.0, 100.0, "m/s", "RTL speed (0: WP_SPEED)"),
+    P("MIS_DONE_BEHAVE", INT8, 0, 0, 3, "", "At the end of a mission: 0 hold, 1 loiter, 2 acro, 3 manual"),
+    P("FS_GCS_ENABLE", INT8, 0, 0, 2, "", "GCS failsafe: 0 off, 1 RTL, 2 hold"),
+    P("FS_TIMEOUT", REAL32, 1.5, 1.0, 100.0, "s", "GCS heartbeat loss before the failsafe"),
+) + common.fence_params(alt_max_m=100.0) + common.rally_params() + common.battery_failsafe_params(0, 0) \
+    + common.rc_override_params()
+
+GCS_ACTIONS = {1: "RTL", 2: "HOLD"}
+BATTERY_ACTIONS = {1: "RTL", 2: "HOLD", 3: "RTL", 4: "HOLD", 5: DISARM}
+FENCE_ACTIONS = {1: "RTL", 2: "HOLD", 3: "RTL", 4: "HOLD"}
+MISSION_END = {0: None, 1: "LOITER", 2: "ACRO", 3: "MANUAL"}
+
+
+def settings(get) -> Settings:
+    cruise = float(get("CRUISE_SPEED"))
+    wp_speed = float(get("WP_SPEED")) or cruise
+    limits = Limits(
+        cruise_speed_ms=wp_speed, max_speed_ms=max(cruise, wp_speed) * 1.5, accel_ms2=float(get("ATC_ACCEL_MAX")) or 1.0,
+        yaw_rate_dps=float(get("ATC_STR_RAT_MAX")) or 120.0, wp_radius_m=float(get("WP_RADIUS")),
+        loiter_radius_m=float(get("LOIT_RADIUS")), hover_throttle=float(get("CRUISE_THROTTLE")) / 100.0,
+        cruise_current_a=4.0, angle_max_deg=45.0,
+    )
+    return Settings(
+        limits=limits, rtl_alt_m=-1.0, rtl_lands=False, rtl_loiter_s=0.0, rtl_speed_ms=float(get("RTL_SPEED")) or None,
+        mission_end=MISSION_END.get(int(get("MIS_DONE_BEHAVE"))), ignore_alt_for_waypoints=True,
+        gcs_failsafe=common.action(GCS_ACTIONS, get("FS_GCS_ENABLE")), gcs_timeout_s=float(get("FS_TIMEOUT")),
+        battery_low=common.action(BATTERY_ACTIONS, get("BATT_FS_LOW_ACT")),
+        battery_critical=common.action(BATTERY_ACTIONS, get("BATT_FS_CRT_ACT")),
+        fence_action=common.action(FENCE_ACTIONS, get("FENCE_ACTION")),
+    )
+
+
+ROVER = VehicleType(
+    name="rover",
+    mav_type=M.MAV_TYPE_GROUND_ROVER,
+    modes=_modes,
+    initial_mode=_by_name["MANUAL"],
+    capabilities=(
+        M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT | M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+        | M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+    ),
+    guided_modes=frozenset({_by_name[n] for n in ("GUIDED", "AUTO", "RTL", "SMART_RTL")}),
+    manual_modes=frozenset({_by_name["MANUAL"]}),
+    behaviours=modes_named(
+        _modes, MANUAL=B.MANUAL, ACRO=B.MANUAL, LEARNING=B.MANUAL, STEERING=B.MANUAL, SIMPLE=B.MANUAL,
+        HOLD=B.HOLD, LOITER=B.HOLD, FOLLOW=B.HOLD, DOCK=B.HOLD, CIRCLE=B.CIRCLE, AUTO=B.AUTO, RTL=B.RTL,
+        SMART_RTL=B.RTL, GUIDED=B.GUIDED, INITIALISING=B.IDLE,
+    ),
+    dynamics=GroundDynamics,
+    params=PARAMS,
+    settings=settings,
+    prearm_checks=prearm.DRIVING_CHECKS,
+    commands={M.MAV_CMD_DO_SET_REVERSE: commands.set_reverse},
+    ardupilot_stream_rates=stream_rates(1, 1, 1, 1, 1, 1, 1, 1, 10, 0),
+)
