@@ -12,7 +12,8 @@ import time
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 
 from .helpers import (
-    M, VEHICLE, free_listener, from_vehicle, is_ack, pump, tcp_channel, tcp_url, udp_channel, udp_url, wait_for,
+    M, VEHICLE, free_listener, from_vehicle, is_ack, pump, tcp_channel, tcp_url, udp_channel, udp_url,
+    wait_for,
 )
 
 HEARTBEAT_WAIT_S = 2.5  # HEARTBEAT is 1 Hz: a new peer may wait up to a second for the next one

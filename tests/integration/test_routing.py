@@ -47,7 +47,8 @@ class Net:
 
 
 def _start(daemon, client, cam_extra: dict | None = None) -> Net:
-    d = daemon({"channels": [udp_channel("gcs1"), udp_channel("gcs2"), udp_channel("cam", **(cam_extra or {}))]})
+    cam = udp_channel("cam", **(cam_extra or {}))
+    d = daemon({"channels": [udp_channel("gcs1"), udp_channel("gcs2"), cam]})
     net = Net(
         d,
         client(udp_url(d.port("gcs1")), *GCS1),
@@ -190,6 +191,13 @@ def test_unknown_message_id_is_forwarded_unchanged_as_a_broadcast(net):
     assert len(got["cam"]) == 1
     assert got["gcs1"] == []
     assert got["gcs2"][0].type == "UNKNOWN_42424"
+
+
+def test_unknown_message_id_from_a_source_never_seen_with_a_good_frame_is_dropped(net):
+    raw = v2_frame(42424, bytes(range(20)), 99, 1)  # its CRC cannot be checked: it could be noise
+    net.gcs1.write(raw)
+    got = net.after(raw)
+    assert got == {"gcs1": [], "gcs2": [], "cam": []}
 
 
 def test_twenty_five_systems_heartbeating_through_one_channel_do_not_break_routing(net, client):

@@ -161,12 +161,13 @@ def test_get_message_interval_of_an_unmapped_id_fails_with_interval_zero(gcs):
 
 def test_request_message_of_message_interval_is_get_message_interval(gcs):
     mark = gcs.mark()
-    ack = command(gcs, REQUEST_MESSAGE, M.MAVLINK_MSG_ID_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT)
+    position = M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT
+    ack = command(gcs, REQUEST_MESSAGE, M.MAVLINK_MSG_ID_MESSAGE_INTERVAL, position)
     assert ack.msg.result == M.MAV_RESULT_ACCEPTED
     replies = [r for r in gcs.since(mark) if r.type in ("MESSAGE_INTERVAL", "COMMAND_ACK")]
     assert [r.type for r in replies] == ["MESSAGE_INTERVAL", "COMMAND_ACK"]
-    assert (replies[0].msg.message_id, replies[0].msg.interval_us) == (
-        M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, int(1e6 / STREAMS["position"]))
+    reply = replies[0].msg
+    assert (reply.message_id, reply.interval_us) == (position, int(1e6 / STREAMS["position"]))
 
 
 def test_request_message_sends_exactly_one_copy(gcs):
