@@ -104,7 +104,7 @@ def simstate(node, channel, now):
 def vfr_hud(node, channel, now):
     s = node.state
     return M.MAVLink_vfr_hud_message(
-        s.groundspeed_ms, s.groundspeed_ms, int(s.heading_deg), s.throttle_pct, s.alt_amsl_m, -s.vd_ms  # alt is AMSL
+        s.airspeed_ms, s.groundspeed_ms, int(s.heading_deg), s.throttle_pct, s.alt_amsl_m, -s.vd_ms  # alt is AMSL
     )
 
 
@@ -140,6 +140,9 @@ MOTOR_FUNCTIONS = range(33, 41)
 
 def _servo_pwm(node, n: int) -> int:
     """SERVOn_ scaling: motors follow the throttle between MIN and MAX, others sit at TRIM."""
+    override = node.state.servo_override.get(n)  # DO_SET_SERVO, DO_REPEAT_SERVO, DO_MOTOR_TEST
+    if override is not None:
+        return override
     p = node.params.get
     lo, hi = p(f"SERVO{n}_MIN"), p(f"SERVO{n}_MAX")
     if p(f"SERVO{n}_FUNCTION") in MOTOR_FUNCTIONS:
@@ -156,8 +159,9 @@ def servo_output_raw(node, channel, now):
 
 
 def _rc_values(node, count: int) -> list[int]:
-    """Sticks at rest: each RC input at its RCn_TRIM."""
-    return [int(node.params.get(f"RC{n}_TRIM")) for n in range(1, count + 1)]
+    """Each RC input at its RCn_TRIM (sticks at rest), or as RC_CHANNELS_OVERRIDE set it."""
+    override = node.state.rc_override
+    return [override.get(n) or int(node.params.get(f"RC{n}_TRIM")) for n in range(1, count + 1)]
 
 
 def rc_channels(node, channel, now):
@@ -173,7 +177,8 @@ def rc_channels_raw(node, channel, now):
 def nav_controller_output(node, channel, now):
     s = node.state
     return M.MAVLink_nav_controller_output_message(
-        math.degrees(s.roll_rad), math.degrees(s.pitch_rad), int(s.heading_deg), int(s.heading_deg), 0, 0, 0, 0
+        math.degrees(s.roll_rad), math.degrees(s.pitch_rad), int(s.target_bearing_deg), int(s.target_bearing_deg),
+        min(int(s.wp_dist_m), 65535), s.alt_error_m, 0, s.xtrack_error_m,
     )
 
 
@@ -186,7 +191,10 @@ def ahrs(node, channel, now):
 
 
 def wind(node, channel, now):
-    return M.MAVLink_wind_message(0.0, 0.0, 0.0)
+    s = node.state
+    speed = math.hypot(s.wind_n_ms, s.wind_e_ms)
+    blowing_from = (math.degrees(math.atan2(s.wind_e_ms, s.wind_n_ms)) + 180.0) % 360.0 if speed > 0 else 0.0
+    return M.MAVLink_wind_message(blowing_from, speed, 0.0)
 
 
 def ekf_status_report(node, channel, now):
@@ -228,9 +236,7 @@ def autopilot_version(node, channel, now):
 
 
 def extended_sys_state(node, channel, now):
-    s = node.state
-    landed = M.MAV_LANDED_STATE_IN_AIR if s.relative_alt_m > 0.5 else M.MAV_LANDED_STATE_ON_GROUND
-    return M.MAVLink_extended_sys_state_message(M.MAV_VTOL_STATE_UNDEFINED, landed)
+    return M.MAVLink_extended_sys_state_message(M.MAV_VTOL_STATE_UNDEFINED, int(node.state.landed))
 
 
 PRODUCERS: dict[int, Producer] = {
