@@ -146,14 +146,17 @@ def gcsd_env(src_dir: Path | None) -> dict | None:
 
 
 def export_gcsd_rev(repo: Path, rev: str, dest: Path) -> tuple[Path, str]:
-    """``git archive REV src`` into dest; returns (the src directory to import from, short commit)."""
+    """``git archive REV src`` into dest; returns (the src directory to import from, a description:
+    REV's short commit and, if different, the last commit at or before it that changed src/)."""
     commit = subprocess.run(["git", "rev-parse", "--short", rev], cwd=repo, capture_output=True, text=True,
                             check=True).stdout.strip()
+    src_commit = subprocess.run(["git", "log", "-1", "--format=%h", commit, "--", "src"], cwd=repo,
+                                capture_output=True, text=True, check=True).stdout.strip()
     dest.mkdir(parents=True, exist_ok=True)
     archive = subprocess.run(["git", "archive", "--format=tar", commit, "src"], cwd=repo, capture_output=True,
                              check=True).stdout
     subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
-    return dest / "src", commit
+    return dest / "src", commit if src_commit in ("", commit) else f"{commit} (src/ as of {src_commit})"
 
 
 def gcsd_available(env: dict | None = None) -> tuple[bool, str]:
