@@ -17,9 +17,11 @@ COMPANION = (1, 191)
 def bridge(daemon, tmp_path):
     modem = NullModem()
     fc_conf, companion_conf = bridge_configs(tmp_path, modem)
-    daemon(fc_conf)
+    fc = daemon(fc_conf)
     companion = daemon(companion_conf)
     yield companion
+    companion.stop()
+    fc.stop()
     modem.close()
 
 
