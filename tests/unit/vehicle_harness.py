@@ -59,6 +59,7 @@ class Harness:
         self._out.srcSystem, self._out.srcComponent = sysid, compid
         msg.pack(self._out)
         self.node.handle(self.channel, Frame.from_message(msg), self.t)
+        self.node.send_pass(self.channel, self.t)  # what it queued (STATUSTEXT...) goes out now
 
     def command(self, command: int, *params: float, sysid: int = GCS[0]) -> int | None:
         p = list(params) + [0.0] * (7 - len(params))

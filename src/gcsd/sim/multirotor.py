@@ -110,10 +110,10 @@ class MultirotorDynamics:
             return 0.0, 0.0
         north, east = ne_m(s.lat, s.lon, sp.lat, sp.lon)
         dist = math.hypot(north, east)
-        if dist < HOLD_DEADBAND_M:
-            return 0.0, 0.0
         if self.drifts_when_holding and kind == Kind.HOLD and dist < (sp.radius_m or lim.loiter_radius_m):
             return s.wind_n_ms, s.wind_e_ms  # free drift with the wind inside the loiter radius
+        if dist < HOLD_DEADBAND_M:
+            return 0.0, 0.0
         speed = lim.cruise_speed_ms if sp.speed_ms is None else sp.speed_ms
         speed = min(speed, lim.max_speed_ms, math.sqrt(2.0 * lim.accel_ms2 * dist))
         return north / dist * speed, east / dist * speed
