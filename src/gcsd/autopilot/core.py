@@ -259,7 +259,7 @@ class Autopilot(Actions):
 
     def _sp_takeoff(self, s, dt, now) -> Setpoint:
         if self.hold.kind == Kind.TAKEOFF and self.takeoff_done(self.hold.alt_m):
-            self.hold = self._here(Kind.HOLD)
+            self.hold = Setpoint(Kind.HOLD, s.lat, s.lon, self.hold.alt_m)  # loiter at the takeoff altitude
         return self.hold
 
     def _sp_circle(self, s, dt, now) -> Setpoint:
@@ -297,6 +297,8 @@ class Autopilot(Actions):
                 self._touchdown_s = s.time_s
                 self.node.send_text(M.MAV_SEVERITY_INFO, "Landed")
             if s.time_s - self._touchdown_s >= self.settings.land_disarm_delay_s:
+                if self.behaviour == B.AUTO:
+                    self.runner.tick(s, 0.0)  # the mission's LAND item completes before the disarm
                 self.disarm("landed")
             return
         delay = self.settings.extra.get("disarm_delay_s", 0.0)
