@@ -6,11 +6,17 @@ RADIO_STATUS), ask the router (learn, forward, process locally?), write the raw 
 chosen channels, then hand the decoded message to the local component(s) it is for. Frames with
 a bad CRC are dropped and counted, or, on a `forward_bad_crc` channel, forwarded unchanged as
 broadcasts and never processed.
+
+Send passes: each vehicle node says when it next needs one on a channel (its deadline); a
+channel's pass runs only the nodes that are due, that were woken (something queued) or that
+just handled a frame, so a swarm of a hundred vehicles costs what their messages cost, not a
+hundred schedulers per pass. `backend` (gcsd.embed) replaces each node's simulation.
 """
 
 from __future__ import annotations
 
 import asyncio
+import functools
 from pathlib import Path
 
 import structlog
@@ -34,10 +40,11 @@ log = structlog.get_logger("gcsd.gcs")
 
 STATS_INTERVAL_S = 10.0
 PEER_SWEEP_INTERVAL_S = 1.0
+IDLE_NODE_PASS_S = 0.5  # a node with nothing scheduled still gets a pass this often (its simulation steps)
 
 
 class GCS:
-    def __init__(self, config: Config, clock: Clock | None = None) -> None:
+    def __init__(self, config: Config, clock: Clock | None = None, backend=None) -> None:
         self.config = config
         self.clock = clock or Clock()
         now = self.clock.now
@@ -47,8 +54,12 @@ class GCS:
         self.opened: set[int] = set()
         self.all_open = asyncio.Event()
         vtype = vehicle_type(config.vehicle.type)
+        # per channel, when each node next needs a send pass (0: now)
+        self._node_due = [[0.0] * config.vehicle.count for _ in self.channels]
         self.nodes = [
-            VehicleNode(i, config, vtype, self.clock, self.channels, self.wake) for i in range(config.vehicle.count)
+            VehicleNode(i, config, vtype, self.clock, self.channels, functools.partial(self._wake_node, i),
+                        backend=None if backend is None else backend(i))
+            for i in range(config.vehicle.count)
         ]
         for node in self.nodes:  # FTP root: ftp.root under the vehicle's state directory
             node.add_service(FtpService(node, node.state_dir / config.ftp.root, config.ftp.max_file_bytes))
@@ -81,6 +92,10 @@ class GCS:
     def wake(self, channel: Channel) -> None:
         self._wakeups[channel.index].set()
 
+    def _wake_node(self, index: int, channel: Channel) -> None:
+        self._node_due[channel.index][index] = 0.0
+        self._wakeups[channel.index].set()
+
     # --- receive ---------------------------------------------------------------------------
     def on_frame(self, channel: Channel, frame: Frame) -> None:
         now = self.clock.now()
@@ -109,6 +124,8 @@ class GCS:
         if decision.process_locally and frame.known:
             for node in self._nodes_for(frame.target_system, frame.target_component):
                 node.handle(channel, frame, now)
+                for due in self._node_due:  # whatever it queued goes out at the next pass
+                    due[node.index] = 0.0
 
     def _nodes_for(self, target_system: int, target_component: int) -> list[VehicleNode]:
         if target_system > 0:
@@ -145,10 +162,13 @@ class GCS:
             for gone in channel.forget_silent_peers(now):
                 log.info("peer_forgotten", channel=channel.name, peer=f"{gone[0]}:{gone[1]}")
         deadline = None
-        for node in self.nodes:
-            d = node.send_pass(channel, now)
-            if d is not None and (deadline is None or d < deadline):
-                deadline = d
+        due = self._node_due[channel.index]
+        for index, node in enumerate(self.nodes):
+            if due[index] <= now:
+                d = node.send_pass(channel, now)
+                due[index] = d if d is not None else now + IDLE_NODE_PASS_S
+            if deadline is None or due[index] < deadline:
+                deadline = due[index]
         return deadline
 
     # --- run -------------------------------------------------------------------------------
