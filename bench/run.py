@@ -29,6 +29,7 @@ if __package__ in (None, ""):  # run as a script: python bench/run.py
 
 from bench import measure  # noqa: E402
 from bench import mission as bench_mission  # noqa: E402
+from bench import swarm as bench_swarm  # noqa: E402
 from bench import params as bench_params  # noqa: E402
 from bench.measure import Path, SeqAllocator, log  # noqa: E402
 from bench.peers import start_receiver, start_sender  # noqa: E402
@@ -43,7 +44,7 @@ from bench.routers import (  # noqa: E402
     start_mavproxy,
 )
 
-WHAT = ("harness", "throughput", "latency", "vehicle", "params", "mission")
+WHAT = ("harness", "throughput", "latency", "vehicle", "params", "mission", "swarm")
 LATENCY_RATE = 1000
 
 
@@ -225,6 +226,8 @@ class Runner:
             self.params()
         if "mission" in a.what:
             self.mission()
+        if "swarm" in a.what:
+            self.res["swarm"] = bench_swarm.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
 
     def harness(self) -> None:
         a = self.a
@@ -403,6 +406,8 @@ class Runner:
         if self.res.get("mission"):
             out += ["", "Missions: 1 000 items uploaded and downloaded by MAVSDK mission_raw, gcsd against MAVSDK's "
                     "mission_raw_server (bench/mission.py)", "", bench_mission.table(self.res["mission"])]
+        if self.res.get("swarm"):
+            out += ["", bench_swarm.table(self.res["swarm"])]
         return "\n".join(out)
 
 
