@@ -1,4 +1,4 @@
-"""Mission upload and download of 1 000 items by MAVSDK, on loopback: gcsd against MAVSDK's mission_raw_server.
+"""Mission upload and download of 1 000 items by MAVSDK on loopback: gcsd against mission_raw_server.
 
 SPEC.md: "mission upload and download, 1 000 items, via MAVSDK: <= 1.5 s each".
 
@@ -123,7 +123,8 @@ def mavsdk_client(port: int, reps: int, total: int) -> int:
                 out["download_s"].append(t2 - t1)
                 back = [(g.seq, g.frame, g.command, g.current, g.autocontinue, g.param1, g.param2, g.param3,
                          g.param4, g.x, g.y, g.z, g.mission_type) for g in got]
-                out["mismatches"].append(int(len(back) != len(fields)) + sum(a != b for a, b in zip(back, fields)))
+                differing = int(len(back) != len(fields)) + sum(a != b for a, b in zip(back, fields))
+                out["mismatches"].append(differing)
             mission.destroy()
     except Exception as exc:  # reported in the table, not a crash of the whole bench
         out["error"] = repr(exc)
@@ -180,13 +181,15 @@ def _run(name: str, launch, port: int, ready: str | None, reps: int, total: int,
     try:
         _wait_ready(server, port, ready)
         argv = [sys.executable, str(THIS), "mavsdk-client", str(port), str(reps), str(total)]
-        done = subprocess.run(argv, capture_output=True, text=True, timeout=60 + 20 * reps, cwd=workdir, env=env)
+        done = subprocess.run(argv, capture_output=True, text=True, timeout=60 + 20 * reps, cwd=workdir,
+                              env=env, check=False)
         (workdir / f"mission-client-{port}.log").write_text(done.stdout + done.stderr)
         line = next((ln for ln in done.stdout.splitlines() if ln.startswith("RESULT ")), None)
         if line is None:
             raise RuntimeError(f"MAVSDK client gave no result (exit {done.returncode})")
         data = json.loads(line[7:])
-        res.upload_s, res.download_s, res.mismatches = data["upload_s"], data["download_s"], data["mismatches"]
+        res.upload_s, res.download_s = data["upload_s"], data["download_s"]
+        res.mismatches = data["mismatches"]
         res.error = data.get("error")
         if res.upload_s:
             log(f"[mission] {name}: upload median {res.upload_median_s * 1000:.1f} ms, download median "
@@ -202,7 +205,8 @@ def _run(name: str, launch, port: int, ready: str | None, reps: int, total: int,
     return res
 
 
-def measure(workdir: Path, reps: int = 10, env: dict | None = None, total: int = TOTAL) -> dict[str, ServerResult]:
+def measure(workdir: Path, reps: int = 10, env: dict | None = None,
+            total: int = TOTAL) -> dict[str, ServerResult]:
     """gcsd then MAVSDK's mission_raw_server, each driven by the same MAVSDK client."""
     env = dict(os.environ if env is None else env)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
@@ -219,7 +223,8 @@ def measure(workdir: Path, reps: int = 10, env: dict | None = None, total: int =
     port = free_udp_port()
     log(f"[mission] MAVSDK mission_raw_server: the same client, {reps} times")
     argv = [sys.executable, str(THIS), "serve-mavsdk", str(port)]
-    results["mavsdk"] = _run("MAVSDK mission_raw_server", lambda: _launch("mission-server", argv, workdir, env),
+    results["mavsdk"] = _run("MAVSDK mission_raw_server",
+                             lambda: _launch("mission-server", argv, workdir, env),
                              port, "ready", reps, total, workdir, env)
     return results
 
@@ -255,10 +260,11 @@ def table(results: dict[str, ServerResult]) -> str:
         if r.error:
             notes.append(f"{r.name}: {r.error}")
         if r.upload_s:
-            notes.append(f"{r.name}: uploads {', '.join(f'{t * 1000:.0f}' for t in r.upload_s)} ms; downloads "
-                         f"{', '.join(f'{t * 1000:.0f}' for t in r.download_s)} ms; downloaded plan differing "
-                         f"from the uploaded one: {sum(bool(x) for x in r.mismatches)} of {len(r.mismatches)}; "
-                         f"{r.stop}")
+            ups = ", ".join(f"{t * 1000:.0f}" for t in r.upload_s)
+            downs = ", ".join(f"{t * 1000:.0f}" for t in r.download_s)
+            differing = sum(bool(x) for x in r.mismatches)
+            notes.append(f"{r.name}: uploads {ups} ms; downloads {downs} ms; downloaded plan differing from "
+                         f"the uploaded one: {differing} of {len(r.mismatches)}; {r.stop}")
     return "\n".join([line(head), "  ".join("-" * w for w in widths), *map(line, body), "", *notes])
 
 

@@ -70,8 +70,8 @@ class MissionClient:
         started = time.monotonic()
         highest = -1
         while time.monotonic() - started < self.deadline_s:
-            r, mark = self._next(mark, ("MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"), mission_type,
-                                 self.timeout_s)
+            wanted = ("MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK")
+            r, mark = self._next(mark, wanted, mission_type, self.timeout_s)
             if r is None:
                 self.resent += 1
                 self.c.send(last)

@@ -9,6 +9,7 @@ ownership between two ground stations, MAVLink1 and legacy messages, the current
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
@@ -18,14 +19,16 @@ from gcsd.mission import MissionItem
 from .helpers import VEHICLE, is_ack, is_type, pump, udp_channel, udp_url, wait_for
 from .mission_client import LossyProxy, MissionClient
 
-HOME_ITEM = MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 1, 1, 0, 0, 0, 0, -353632620, 1491652370, 584.0)
+HOME_ITEM = MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 1, 1, 0, 0, 0, 0,
+                        -353632620, 1491652370, 584.0)
 LAT, LON = -353630000, 1491650000
 REL = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 ACCEPTED = M.MAV_MISSION_ACCEPTED
 
 
 def waypoint(i: int, alt: float = 30.0) -> MissionItem:
-    return MissionItem(M.MAV_CMD_NAV_WAYPOINT, REL, 0, 1, 0.0, 2.0, 0.0, 0.0, LAT + 1000 * i, LON + 700 * i, alt)
+    return MissionItem(M.MAV_CMD_NAV_WAYPOINT, REL, 0, 1, 0.0, 2.0, 0.0, 0.0,
+                       LAT + 1000 * i, LON + 700 * i, alt)
 
 
 MISSION_PLAN = [
@@ -40,10 +43,11 @@ FENCE_PLAN = [
     MissionItem(M.MAV_CMD_NAV_FENCE_RETURN_POINT, M.MAV_FRAME_GLOBAL_INT, 0, 1, 0, 0, 0, 0, LAT, LON, 0.0),
     *[MissionItem(INC, M.MAV_FRAME_GLOBAL_INT, 0, 1, 4.0, 0, 0, 0, LAT + dx, LON + dy, 0.0)
       for dx, dy in ((-5000, -5000), (-5000, 5000), (5000, 5000), (5000, -5000))],
-    MissionItem(M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION, M.MAV_FRAME_GLOBAL_INT, 0, 1, 25.0, 0, 0, 0, LAT, LON + 100, 0.0),
+    MissionItem(M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION, M.MAV_FRAME_GLOBAL_INT, 0, 1, 25.0, 0, 0, 0,
+                LAT, LON + 100, 0.0),
 ]
-RALLY_PLAN = [MissionItem(M.MAV_CMD_NAV_RALLY_POINT, REL, 0, 1, 0, 0, 0, 0, LAT + 300 * i, LON - 200 * i, 40.0 + i)
-              for i in range(3)]
+RALLY_PLAN = [MissionItem(M.MAV_CMD_NAV_RALLY_POINT, REL, 0, 1, 0, 0, 0, 0,
+                          LAT + 300 * i, LON - 200 * i, 40.0 + i) for i in range(3)]
 PLANS = {M.MAV_MISSION_TYPE_MISSION: MISSION_PLAN, M.MAV_MISSION_TYPE_FENCE: FENCE_PLAN,
          M.MAV_MISSION_TYPE_RALLY: RALLY_PLAN}
 TYPES = [pytest.param(t, id=n) for t, n in ((0, "mission"), (1, "fence"), (2, "rally"))]
@@ -66,7 +70,7 @@ def gcs(daemon, client):
 
 
 def home_only() -> list[MissionItem]:
-    return [MissionItem(HOME_ITEM.command, HOME_ITEM.frame, 0, 1, 0, 0, 0, 0, HOME_ITEM.x, HOME_ITEM.y, HOME_ITEM.z)]
+    return [replace(HOME_ITEM, current=0)]
 
 
 @pytest.mark.parametrize("mission_type", TYPES)
@@ -94,7 +98,8 @@ def test_all_three_plans_survive_a_restart(daemon, client, tmp_path):
         assert mc.upload(plan, mission_type) == ACCEPTED
     first.stop()
     state = tmp_path / "state"
-    assert {p.name for p in state.glob("*.waypoints")} == {"mission.waypoints", "fence.waypoints", "rally.waypoints"}
+    files = {p.name for p in state.glob("*.waypoints")}
+    assert files == {"mission.waypoints", "fence.waypoints", "rally.waypoints"}
 
     second = daemon(config())
     c2 = client(udp_url(second.port("gcs")))
@@ -133,7 +138,8 @@ def test_a_second_ground_station_is_denied_while_the_first_uploads(daemon, clien
     mark_a = a.mark()
     a.send(M.MAVLink_mission_count_message(*VEHICLE, len(RALLY_PLAN), 2))
     assert wait_for(a, lambda r: r.type == "MISSION_REQUEST" and r.msg.seq == 0, since=mark_a)
-    for msg in (M.MAVLink_mission_count_message(*VEHICLE, 2, 2), M.MAVLink_mission_clear_all_message(*VEHICLE, 2),
+    for msg in (M.MAVLink_mission_count_message(*VEHICLE, 2, 2),
+                M.MAVLink_mission_clear_all_message(*VEHICLE, 2),
                 M.MAVLink_mission_clear_all_message(*VEHICLE, M.MAV_MISSION_TYPE_ALL)):
         mark_b = b.mark()
         b.send(msg)

@@ -11,7 +11,8 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from gcsd.mission import FenceStore, MissionItem, MissionStore, RallyStore
 from gcsd.mission.stores import validate
 
-HOME = MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 0, 1, 0, 0, 0, 0, -353632620, 1491652370, 584.0)
+HOME = MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 0, 1, 0, 0, 0, 0,
+                   -353632620, 1491652370, 584.0)
 LAT, LON = -353600000, 1491600000
 ACCEPTED = M.MAV_MISSION_ACCEPTED
 INC, EXC = M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
@@ -20,7 +21,8 @@ RETURN = M.MAV_CMD_NAV_FENCE_RETURN_POINT
 
 
 def wp(seq: int = 1, **kw) -> MissionItem:
-    return replace(MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, x=LAT + seq, y=LON, z=20.0), **kw)
+    item = MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, x=LAT + seq, y=LON, z=20)
+    return replace(item, **kw)
 
 
 def jump(target: float) -> MissionItem:
@@ -40,7 +42,8 @@ def polygon(command: int, n: int, declared: float | None = None) -> list[Mission
 
 
 def rally(**kw) -> MissionItem:
-    return replace(MissionItem(M.MAV_CMD_NAV_RALLY_POINT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, x=LAT, y=LON, z=50.0), **kw)
+    item = MissionItem(M.MAV_CMD_NAV_RALLY_POINT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, x=LAT, y=LON, z=50.0)
+    return replace(item, **kw)
 
 
 def mission_store(**kw) -> MissionStore:
@@ -84,7 +87,8 @@ def test_mission_clear_then_home_change_gives_count_1():
     (wp(x=900_000_001), 3, M.MAV_MISSION_INVALID_PARAM5_X),
     (wp(y=1_800_000_001), 3, M.MAV_MISSION_INVALID_PARAM6_Y),
     (MissionItem(31999), 3, M.MAV_MISSION_UNSUPPORTED),
-    (MissionItem(M.MAV_CMD_DO_CHANGE_SPEED, M.MAV_FRAME_BODY_FRD, param2=5), 3, ACCEPTED),  # no location: any frame
+    # no location: any frame
+    (MissionItem(M.MAV_CMD_DO_CHANGE_SPEED, M.MAV_FRAME_BODY_FRD, param2=5), 3, ACCEPTED),
     (jump(1), 3, ACCEPTED),
     (jump(2), 3, ACCEPTED),
     (jump(0), 3, M.MAV_MISSION_ERROR),  # home is not a jump target
@@ -124,7 +128,8 @@ def test_a_shorter_plan_resets_a_current_item_beyond_it():
     (circle(CIRCLE_EXC), ACCEPTED),
     (MissionItem(RETURN, M.MAV_FRAME_GLOBAL_RELATIVE_ALT, x=LAT, y=LON), ACCEPTED),
     (wp(), M.MAV_MISSION_UNSUPPORTED),
-    (MissionItem(5005, M.MAV_FRAME_GLOBAL_INT, param1=100), M.MAV_MISSION_UNSUPPORTED),  # home circle: not ArduPilot's
+    # the home-centred circle of development.xml: not one of ArduPilot's
+    (MissionItem(5005, M.MAV_FRAME_GLOBAL_INT, param1=100), M.MAV_MISSION_UNSUPPORTED),
     (replace(circle(), frame=M.MAV_FRAME_LOCAL_NED), M.MAV_MISSION_UNSUPPORTED_FRAME),
     (replace(circle(), frame=M.MAV_FRAME_MISSION), M.MAV_MISSION_UNSUPPORTED_FRAME),
     (vertex(EXC, 256), M.MAV_MISSION_INVALID_PARAM1),
@@ -137,7 +142,8 @@ def test_fence_item_checks(item, result):
 FENCE_PLANS = [
     ("empty", [], None),
     ("inclusion square", polygon(INC, 4), None),
-    ("two polygons and circles", polygon(INC, 3) + [circle()] + polygon(EXC, 5) + [circle(CIRCLE_EXC, 10)], None),
+    ("two polygons and circles",
+     polygon(INC, 3) + [circle()] + polygon(EXC, 5) + [circle(CIRCLE_EXC, 10)], None),
     ("a return point", [MissionItem(RETURN, M.MAV_FRAME_GLOBAL_INT, x=LAT, y=LON)] + polygon(INC, 3), None),
     ("two vertices", polygon(INC, 2), "Fence: polygon at item 0 declares 2 vertices (needs at least 3)"),
     ("fewer vertices than declared", polygon(INC, 3, declared=4),
@@ -151,7 +157,8 @@ FENCE_PLANS = [
     ("fractional count", polygon(INC, 3, declared=3.5),
      "Fence: polygon at item 0 declares 3.5 vertices (needs at least 3)"),
     ("zero radius", [circle(radius=0.0)], "Fence: circle at item 0 needs a radius > 0"),
-    ("negative radius", polygon(INC, 3) + [circle(CIRCLE_EXC, -1.0)], "Fence: circle at item 3 needs a radius > 0"),
+    ("negative radius", polygon(INC, 3) + [circle(CIRCLE_EXC, -1.0)],
+     "Fence: circle at item 3 needs a radius > 0"),
     ("NaN radius", [circle(radius=math.nan)], "Fence: circle at item 0 needs a radius > 0"),
     ("two return points", [MissionItem(RETURN, M.MAV_FRAME_GLOBAL_INT, x=LAT, y=LON)] * 2,
      "Fence: second return point at item 1 (at most one)"),

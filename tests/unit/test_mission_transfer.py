@@ -6,17 +6,28 @@ what the machine returns: `Send`s (decoded pymavlink messages), `Text`s and `Pla
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Callable
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.mission import FenceStore, MissionItem, MissionStore, MissionTransfer, Origin, PlanChanged, RallyStore, Send, Text
+from gcsd.mission import (
+    FenceStore,
+    MissionItem,
+    MissionStore,
+    MissionTransfer,
+    Origin,
+    PlanChanged,
+    RallyStore,
+    Send,
+    Text,
+)
 
 GCS = Origin(255, 190, "gcs")
 OTHER = Origin(250, 1, "other")  # another ground station
-HOME = MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 0, 1, 0, 0, 0, 0, -353632620, 1491652370, 584.0)
+HOME = MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 0, 1, 0, 0, 0, 0,
+                   -353632620, 1491652370, 584.0)
 LAT0, LON0 = -353600000, 1491600000
 
 
@@ -46,8 +57,8 @@ def _waypoint(seq: int) -> MissionItem:
 
 
 def _circle(seq: int) -> MissionItem:
-    return MissionItem(M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, M.MAV_FRAME_GLOBAL_INT, 0, 1, 100.0 + seq, 0, 0, 0,
-                       LAT0 + seq, LON0 + seq, 0.0)
+    return MissionItem(M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, M.MAV_FRAME_GLOBAL_INT, 0, 1,
+                       100.0 + seq, 0, 0, 0, LAT0 + seq, LON0 + seq, 0.0)
 
 
 def _rally(seq: int) -> MissionItem:
@@ -506,7 +517,8 @@ def test_legacy_request_answers_mission_item_in_degrees_with_one_warning_per_lis
         warnings += texts(out)
         [m] = sent(out, "MISSION_ITEM")
         expected = kind.served(plan)[seq]
-        assert m.x == pytest.approx(expected.x / 1e7, abs=1e-7) and m.y == pytest.approx(expected.y / 1e7, abs=1e-7)
+        assert m.x == pytest.approx(expected.x / 1e7, abs=1e-7)
+        assert m.y == pytest.approx(expected.y / 1e7, abs=1e-7)
     assert warnings == ["got MISSION_REQUEST; use MISSION_REQUEST_INT!"]
     mt.mission_request_list(GCS, 2.0)
     assert texts(mt.mission_request(GCS, 0, True, 2.0)) == ["got MISSION_REQUEST; use MISSION_REQUEST_INT!"]
@@ -644,6 +656,12 @@ def _result_of_item(kind: Kind, item: MissionItem, count: int = 3) -> int:
     return acks(mt.mission_item(GCS, 1, item, False, 0.0))[0]
 
 
+def _result_after_count(kind: Kind, then) -> int:
+    mt = machine(kind)
+    mt.mission_count(GCS, 2, 0.0)
+    return acks(then(mt))[0]
+
+
 @pytest.mark.parametrize(("name", "scenario"), [
     ("ACCEPTED", lambda: acks(upload(machine(RALLY), RALLY.plan(1)))[0]),
     ("ERROR", lambda: acks(machine(FENCE).mission_item(GCS, 0, FENCE.item(0), False, 0.0))[0]),
@@ -655,10 +673,8 @@ def _result_of_item(kind: Kind, item: MissionItem, count: int = 3) -> int:
     ("INVALID_PARAM6_Y", lambda: _result_of_item(MISSION, replace(MISSION.item(1), y=-1_800_000_001))),
     ("INVALID_PARAM7", lambda: _result_of_item(RALLY, replace(RALLY.item(1), z=-40000.0))),
     ("INVALID_SEQUENCE", lambda: acks(machine(FENCE).mission_request(GCS, 0, False, 0.0))[0]),
-    ("DENIED", lambda: (lambda mt: (mt.mission_count(GCS, 2, 0.0), acks(mt.mission_count(OTHER, 2, 0.0))[0])[1])(
-        machine(MISSION))),
-    ("OPERATION_CANCELLED", lambda: (lambda mt: (mt.mission_count(GCS, 2, 0.0), acks(mt.tick(8.0))[0])[1])(
-        machine(RALLY))),
+    ("DENIED", lambda: _result_after_count(MISSION, lambda mt: mt.mission_count(OTHER, 2, 0.0))),
+    ("OPERATION_CANCELLED", lambda: _result_after_count(RALLY, lambda mt: mt.tick(8.0))),
 ])
 def test_each_result_code_is_produced(name, scenario):
     assert scenario() == getattr(M, f"MAV_MISSION_{name}")
@@ -669,7 +685,36 @@ def test_a_do_jump_may_target_any_item_of_the_plan_the_upload_makes_but_not_beyo
     mt = machine(MISSION)
     upload(mt, MISSION.plan(3))
     mt.mission_write_partial_list(GCS, 3, 3, 1.0)
-    assert acks(mt.mission_item(GCS, 3, jump(3), False, 1.0)) == [M.MAV_MISSION_ACCEPTED]  # appended by this upload
+    # item 3 is appended by this very upload
+    assert acks(mt.mission_item(GCS, 3, jump(3), False, 1.0)) == [M.MAV_MISSION_ACCEPTED]
     mt.mission_count(GCS, 3, 2.0)
     mt.mission_item(GCS, 0, MISSION.item(0), False, 2.0)
     assert acks(mt.mission_item(GCS, 1, jump(3), False, 2.0)) == [M.MAV_MISSION_ERROR]  # the new plan has 3
+
+
+# --- whole plans (FTP @MISSION/*.dat) ---------------------------------------------------------------
+
+
+def test_a_whole_plan_written_at_once_replaces_the_plan(kind):
+    mt = machine(kind)
+    plan = kind.plan(4)
+    result, out = mt.write_plan(plan, 0.0)
+    assert result == M.MAV_MISSION_ACCEPTED and PlanChanged(kind.mission_type, 4) in out
+    assert items_of(mt) == kind.served(plan)
+
+
+def test_a_whole_plan_gets_the_checks_of_an_upload_and_the_old_plan_stays(kind):
+    mt = machine(kind, max_items=4)
+    old = kind.plan(2)
+    mt.write_plan(old, 0.0)
+    assert mt.write_plan(kind.plan(5), 0.0)[0] == M.MAV_MISSION_NO_SPACE
+    assert mt.write_plan([kind.item(0), kind.invalid], 0.0)[0] == kind.invalid_result
+    mt.mission_count(GCS, 2, 1.0)
+    assert mt.write_plan(kind.plan(3), 1.0)[0] == M.MAV_MISSION_DENIED
+    assert items_of(mt) == kind.served(old)
+
+
+def test_a_whole_fence_invalid_as_a_whole_is_an_error_with_the_reason():
+    mt = machine(FENCE)
+    result, out = mt.write_plan([replace(FENCE.item(0), param1=0.0)], 0.0)
+    assert result == M.MAV_MISSION_ERROR and texts(out) == ["Fence: circle at item 0 needs a radius > 0"]

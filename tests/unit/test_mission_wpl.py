@@ -51,7 +51,8 @@ def test_the_file_is_qgc_wpl_110_with_seven_decimal_degrees():
     text = dumps(PLAN[:2])
     lines = text.splitlines()
     assert lines[0] == "QGC WPL 110"
-    assert lines[1].split("\t") == ["0", "1", "0", "16", "0", "0", "0", "0", "-35.3632620", "149.1652370", "584", "1"]
+    assert lines[1].split("\t") == [
+        "0", "1", "0", "16", "0", "0", "0", "0", "-35.3632620", "149.1652370", "584", "1"]
     assert lines[2].split("\t")[8:10] == ["-35.3632619", "149.1652371"]
 
 
@@ -91,7 +92,8 @@ def test_an_empty_plan_is_just_the_header():
     ("QGC WPL 100\n", 1, "expected the header 'QGC WPL 110', got 'QGC WPL 100'"),
     ("QGC WPL 110\n0\t1\t0\t16\t0\t0\n", 2, "expected 12 values, got 6"),
     ("QGC WPL 110\n1\t0\t0\t16\t0\t0\t0\t0\t1\t2\t3\t1\n", 2, "expected seq 0, got 1"),
-    ("QGC WPL 110\n0\t0\t0\t16\t0\t0\t0\t0\tnorth\t2\t3\t1\n", 2, "could not convert string to float: 'north'"),
+    ("QGC WPL 110\n0\t0\t0\t16\t0\t0\t0\t0\tnorth\t2\t3\t1\n", 2,
+     "could not convert string to float: 'north'"),
     ("QGC WPL 110\n0\t0\t0\t16\t0\t0\t0\t0\tnan\t2\t3\t1\n", 2, "x or y is not a finite number"),
     ("QGC WPL 110\n0\t0\t0\t177\t0\t0\t0\t0\t1e12\t2\t3\t1\n", 2, "x or y out of range"),
 ])
@@ -145,5 +147,6 @@ def test_item_int_round_trips_through_the_message():
     for seq, item in enumerate(PLAN):
         msg = item_int_message(item, seq, M.MAV_MISSION_TYPE_FENCE, (255, 190))
         decoded = M.MAVLink(None).decode(bytearray(msg.pack(M.MAVLink(None, 1, 1))))
-        assert (decoded.seq, decoded.mission_type, decoded.target_system) == (seq, M.MAV_MISSION_TYPE_FENCE, 255)
+        assert decoded.seq == seq and decoded.target_system == 255
+        assert decoded.mission_type == M.MAV_MISSION_TYPE_FENCE
         assert _same(from_item_int(decoded), item)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
@@ -44,7 +44,7 @@ class MissionItem:
     z: float = 0.0
 
 
-@lru_cache(maxsize=None)
+@cache
 def has_location(command: int) -> bool:
     entry = M.enums["MAV_CMD"].get(command)
     return bool(entry is not None and getattr(entry, "has_location", True))

@@ -26,7 +26,7 @@ place) and only then makes it the plan. Nothing here touches a file itself; `sav
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
@@ -122,7 +122,8 @@ class MissionStore(PlanStore):
     name = "mission"
     label = "Mission"
 
-    def __init__(self, max_items: int, home: Callable[[], MissionItem], save: Callable[[Items], None] = _no_save,
+    def __init__(self, max_items: int, home: Callable[[], MissionItem],
+                 save: Callable[[Items], None] = _no_save,
                  clear_refused: Callable[[], bool] = lambda: False) -> None:
         super().__init__(max_items, save)
         self.home = home

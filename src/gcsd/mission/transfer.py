@@ -37,8 +37,8 @@ final MISSION_ACK of a download needs no answer.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
-from typing import Callable, Hashable
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
@@ -48,6 +48,8 @@ from .stores import PlanStore
 RETRY_S = 1.0
 ABORT_S = 8.0
 ACCEPTED, ERROR, DENIED = M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_ERROR, M.MAV_MISSION_DENIED
+LEGACY_ITEM_TEXT = "got MISSION_ITEM; GCS should send MISSION_ITEM_INT"
+LEGACY_REQUEST_TEXT = "got MISSION_REQUEST; use MISSION_REQUEST_INT!"
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,7 +139,8 @@ class MissionTransfer:
         up = self._upload
         if up is None:
             return None
-        return min(up.last_request_s + self.retry_s + self.slowdown_s(up.channel), up.last_item_s + self.abort_s)
+        rerequest_s = up.last_request_s + self.retry_s + self.slowdown_s(up.channel)
+        return min(rerequest_s, up.last_item_s + self.abort_s)
 
     # --- upload ------------------------------------------------------------------------------
     def mission_count(self, origin: Origin, count: int, now: float) -> list[Output]:
@@ -183,7 +186,7 @@ class MissionTransfer:
         out: list[Output] = []
         if legacy and not up.warned_legacy:
             up.warned_legacy = True
-            out.append(Text(M.MAV_SEVERITY_WARNING, "got MISSION_ITEM; GCS should send MISSION_ITEM_INT", up.channel))
+            out.append(Text(M.MAV_SEVERITY_WARNING, LEGACY_ITEM_TEXT, up.channel))
         result = item if isinstance(item, int) else self.store.check_item(item, seq, up.plan_count)
         if result != ACCEPTED:
             self._upload = None
@@ -221,7 +224,7 @@ class MissionTransfer:
         out: list[Output] = []
         if origin.node not in self._download_warned:
             self._download_warned.add(origin.node)
-            out.append(Text(M.MAV_SEVERITY_WARNING, "got MISSION_REQUEST; use MISSION_REQUEST_INT!", origin.channel))
+            out.append(Text(M.MAV_SEVERITY_WARNING, LEGACY_REQUEST_TEXT, origin.channel))
         out.append(Send(origin.channel, item_float_message(item, seq, self.mission_type, target)))
         return out
 
@@ -245,6 +248,30 @@ class MissionTransfer:
             self.store.replace(())
         except OSError as exc:
             return ERROR, [self._save_failed(exc)]
+        return ACCEPTED, [PlanChanged(self.mission_type, self.store.count())]
+
+    # --- whole plans from elsewhere (FTP @MISSION/*.dat) -------------------------------------
+    def write_plan(self, items, now: float) -> tuple[int, list[Output]]:
+        """Replace the whole plan at once, with every check an upload makes: DENIED while an
+        upload is in progress, NO_SPACE above the limit, an item's own result, ERROR (with the
+        reason as text) for a plan invalid as a whole or not saved. Returns (result, outputs)."""
+        items = tuple(items)
+        if self._upload is not None:
+            return DENIED, []
+        if len(items) > self.store.max_items:
+            return M.MAV_MISSION_NO_SPACE, [Text(M.MAV_SEVERITY_WARNING, self._limit_text())]
+        for seq, item in enumerate(items):
+            result = self.store.check_item(item, seq, len(items))
+            if result != ACCEPTED:
+                return result, []
+        reason = self.store.check_plan(items)
+        if reason is not None:
+            return ERROR, [Text(M.MAV_SEVERITY_WARNING, reason)]
+        try:
+            self.store.replace(items)
+        except OSError as exc:
+            return ERROR, [self._save_failed(exc)]
+        self._finished = None
         return ACCEPTED, [PlanChanged(self.mission_type, self.store.count())]
 
     # --- time --------------------------------------------------------------------------------
@@ -313,7 +340,7 @@ class MissionTransfer:
         return out + [self._ack(origin, result)]
 
     def _no_space(self, origin: Origin) -> list[Output]:
-        return [Text(M.MAV_SEVERITY_WARNING, f"Only {self.store.max_items} items are supported", origin.channel),
+        return [Text(M.MAV_SEVERITY_WARNING, self._limit_text(), origin.channel),
                 self._ack(origin, M.MAV_MISSION_NO_SPACE)]
 
     def _save_failed(self, exc: OSError) -> Text:
@@ -323,7 +350,11 @@ class MissionTransfer:
         return Send(up.channel, M.MAVLink_mission_request_message(*up.owner, up.next_seq, self.mission_type))
 
     def _count(self, origin: Origin) -> Send:
-        return Send(origin.channel, M.MAVLink_mission_count_message(*origin.node, self.store.count(), self.mission_type))
+        count = M.MAVLink_mission_count_message(*origin.node, self.store.count(), self.mission_type)
+        return Send(origin.channel, count)
+
+    def _limit_text(self) -> str:
+        return f"Only {self.store.max_items} items are supported"
 
     def _ack(self, origin: Origin, result: int) -> Send:
         return Send(origin.channel, M.MAVLink_mission_ack_message(*origin.node, result, self.mission_type))

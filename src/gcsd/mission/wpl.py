@@ -15,7 +15,7 @@ through mavutil's process-wide dialect choice and cannot load fence or rally typ
 from __future__ import annotations
 
 import struct
-from typing import Iterable
+from collections.abc import Iterable
 
 from .items import DEGREES_E7, LOCAL_FRAMES, LOCAL_SCALE, MissionItem, has_location
 
@@ -106,5 +106,6 @@ def loads(text: str) -> list[MissionItem]:
             raise WplError(number, "x or y is not a finite number") from None
         if not (-2**31 <= xi < 2**31 and -2**31 <= yi < 2**31):
             raise WplError(number, "x or y out of range")
-        items.append(MissionItem(command, frame, current, autocontinue, param1, param2, param3, param4, xi, yi, z))
+        items.append(MissionItem(command, frame, current, autocontinue, param1, param2, param3, param4,
+                                 xi, yi, z))
     return items

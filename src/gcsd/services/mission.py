@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
@@ -53,7 +53,7 @@ GUIDED_CURRENT = (2, 3)  # MISSION_ITEM.current: 2 guided "fly to", 3 change alt
 def home_item(state) -> MissionItem:
     """Item 0 as ArduPilot serves it: a NAV_WAYPOINT at home, absolute altitude."""
     return MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 0, 1, 0.0, 0.0, 0.0, 0.0,
-                       int(round(state.home_lat * 1e7)), int(round(state.home_lon * 1e7)), float(state.home_alt_m))
+                       round(state.home_lat * 1e7), round(state.home_lon * 1e7), float(state.home_alt_m))
 
 
 class MissionService(Service):
@@ -186,7 +186,8 @@ class MissionService(Service):
             state = M.MISSION_STATE_ACTIVE
         else:
             state = M.MISSION_STATE_NOT_STARTED
-        return M.MAVLink_mission_current_message(self.mission.current_seq, max(count - 1, 0), state, int(in_auto))
+        total = max(count - 1, 0)
+        return M.MAVLink_mission_current_message(self.mission.current_seq, total, state, int(in_auto))
 
     def item_reached(self, seq: int) -> None:
         """The vehicle reached mission item `seq`: MISSION_ITEM_REACHED to every ground station."""
@@ -200,6 +201,21 @@ class MissionService(Service):
     def home_changed(self) -> None:
         """Home was set: with no mission, the mission becomes home alone."""
         self.mission.home_changed()
+
+    # --- whole plans (for FTP's @MISSION/mission.dat, fence.dat, rally.dat) -------------------
+    def read_plan(self, mission_type: int) -> tuple[MissionItem, ...] | None:
+        """The plan as a download serves it (None for an unknown type)."""
+        t = self.transfers.get(mission_type)
+        return None if t is None else t.store.items()
+
+    def write_plan(self, mission_type: int, items) -> int:
+        """Replace a whole plan with the checks of an upload; returns the MAV_MISSION_RESULT."""
+        t = self.transfers.get(mission_type)
+        if t is None:
+            return M.MAV_MISSION_UNSUPPORTED
+        result, out = t.write_plan(items, self.node.clock.now())
+        self._run(out)
+        return result
 
     # --- timers ------------------------------------------------------------------------------
     def pending(self, channel, now: float, send) -> float | None:
@@ -231,10 +247,12 @@ class MissionService(Service):
 
     def _ack(self, inc: Incoming, result: int) -> None:
         sysid, compid = inc.sender
-        self.node.reply(inc.channel, M.MAVLink_mission_ack_message(sysid, compid, result, inc.msg.mission_type))
+        ack = M.MAVLink_mission_ack_message(sysid, compid, result, inc.msg.mission_type)
+        self.node.reply(inc.channel, ack)
 
     def _guided(self, inc: Incoming, item: MissionItem | int, current: int) -> None:
-        ok = not isinstance(item, int) and self.guided_handler is not None and self.guided_handler(item, current)
+        handler = self.guided_handler
+        ok = not isinstance(item, int) and handler is not None and handler(item, current)
         self._ack(inc, M.MAV_MISSION_ACCEPTED if ok else M.MAV_MISSION_ERROR)
 
     def _run(self, outputs) -> None:
