@@ -162,7 +162,7 @@ class Autopilot(Actions):
         """Why the vehicle cannot enter mode `number` now (None: it can)."""
         behaviour = self.vehicle.behaviour(number)
         needs_position = behaviour in (B.GUIDED, B.AUTO, B.RTL, B.CIRCLE, B.TRACK)
-        if needs_position and self.state.gps_fix_type < 3 and self.simulated:
+        if needs_position and self.state.gps_fix_type < 3:
             return "requires position"
         if behaviour == B.AUTO and self.node.mission.mission.count() <= 1:
             return "no mission"
