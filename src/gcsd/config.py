@@ -116,6 +116,15 @@ class ChannelConfig:
 
 
 @dataclass(frozen=True)
+class SerialControlPort:
+    """A device a ground station may reach with SERIAL_CONTROL (REFERENCE.md section 11)."""
+
+    port: str  # SERIAL_CONTROL_PORTS: telem1, telem2, gps1, gps2, serial0..serial9
+    device: str
+    baud: int = 115200
+
+
+@dataclass(frozen=True)
 class LogConfig:
     level: str = "info"
     format: str = "console"
@@ -135,6 +144,7 @@ class Config:
         ChannelConfig(name="gcs", type="udp-server", address=("0.0.0.0", 14550)),
     )
     log: LogConfig = LogConfig()
+    serial_control: tuple[SerialControlPort, ...] = ()
 
 
 class ConfigError(Exception):
@@ -178,7 +188,9 @@ def parse_config(text: str, filename: str = "<config>") -> Config:
 
 # --- the schema, one function per section -------------------------------------------------------
 
-_TOP_KEYS = ("vehicle", "state_dir", "params_file", "gcs", "mission", "ftp", "signing", "channels", "log")
+_TOP_KEYS = ("vehicle", "state_dir", "params_file", "gcs", "mission", "ftp", "signing", "channels", "log",
+             "serial_control")
+SERIAL_CONTROL_PORTS = ("telem1", "telem2", "gps1", "gps2", *(f"serial{n}" for n in range(10)))
 _VEHICLE_KEYS = ("type", "sysid", "compid", "count", "home", "speedup")
 _MISSION_KEYS = ("max_items", "max_fence", "max_rally", "retry_ms")
 _CHANNEL_KEYS = ("name", "type", "address", "device", "baud", "mavlink", "streams", "options",
@@ -208,7 +220,24 @@ def _config(r: _Reader, top: _Section) -> Config:
         log=LogConfig(level=r.choice(log["level"], "info", LOG_LEVELS),
                       format=r.choice(log["format"], "console", LOG_FORMATS),
                       tlog=r.text(log["tlog"], None, nullable=True)),
+        serial_control=_serial_control(r, top["serial_control"]),
     )
+
+
+def _serial_control(r: _Reader, f: _Field) -> tuple[SerialControlPort, ...]:
+    ports = []
+    seen: set[str] = set()
+    for item in r.sequence(f):
+        c = r.section(item, ("port", "device", "baud"))
+        for key in ("port", "device"):
+            if key not in c and isinstance(c.node, MappingNode):
+                r.problem(c[key], "required for every serial_control entry")
+        port = r.choice(c["port"], "", SERIAL_CONTROL_PORTS)
+        if port and port in seen:
+            r.problem(c["port"], f"duplicate serial_control port {port!r}")
+        seen.add(port)
+        ports.append(SerialControlPort(port=port, device=r.text(c["device"], ""), baud=r.integer(c["baud"], 115200, 1)))
+    return tuple(p for p in ports if p.port and p.device)
 
 
 def _vehicle(r: _Reader, v: _Section) -> VehicleConfig:

@@ -37,6 +37,6 @@ def attach_services(node, config) -> None:
     node.add_service(MaintenanceService(node, ftp_root))
     node.add_service(HighLatencyService(node))
     serial_control = getattr(config, "serial_control", ())
-    if serial_control:
+    if serial_control and node.index == 0:  # one owner per device, even in a swarm
         from ..services.serialcontrol import SerialControlService
         node.add_service(SerialControlService(node, serial_control))

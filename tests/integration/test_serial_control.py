@@ -1,0 +1,60 @@
+"""SERIAL_CONTROL passthrough to a configured serial device, over a PTY pair: a ground station
+writes bytes to "GPS1" and reads its answer; REPLY packets, unmapped devices and SHELL are ignored."""
+
+from __future__ import annotations
+
+import os
+import tty
+
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from .helpers import pump, udp_channel, udp_url, wait_for
+
+FLAGS = M.SERIAL_CONTROL_FLAG_RESPOND | M.SERIAL_CONTROL_FLAG_EXCLUSIVE
+
+
+def _request(device: int, data: bytes, flags: int = FLAGS, timeout_ms: int = 300, baud: int = 0):
+    return M.MAVLink_serial_control_message(device, flags, timeout_ms, baud, len(data), list(data.ljust(70, b"\0")))
+
+
+def test_serial_control_writes_to_the_device_and_replies_with_what_it_answers(daemon, client):
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    os.set_blocking(master, False)
+    try:
+        d = daemon({"channels": [udp_channel("gcs")],
+                    "serial_control": [{"port": "gps1", "device": os.ttyname(slave), "baud": 9600}]})
+        gcs = client(udp_url(d.port("gcs")))
+        gcs.heartbeat()
+        mark = gcs.mark()
+        gcs.send(_request(M.SERIAL_CONTROL_DEV_GPS1, b"$PMTK605*31\r\n", timeout_ms=500))
+        got = bytearray()
+        for _ in range(20):
+            pump([gcs], 0.02)
+            try:
+                got += os.read(master, 1024)
+            except BlockingIOError:
+                pass
+            if got.endswith(b"\r\n"):
+                break
+        assert bytes(got) == b"$PMTK605*31\r\n"
+        os.write(master, b"$PMTK705,AXN_5.1*2B\r\n")
+        reply = wait_for(gcs, lambda r: r.type == "SERIAL_CONTROL", 3.0, mark)
+        assert reply is not None and reply.src == (1, 1)
+        assert reply.msg.flags == M.SERIAL_CONTROL_FLAG_REPLY and reply.msg.device == M.SERIAL_CONTROL_DEV_GPS1
+        assert bytes(reply.msg.data[:reply.msg.count]) == b"$PMTK705,AXN_5.1*2B\r\n"
+
+        mark = gcs.mark()
+        gcs.send(_request(M.SERIAL_CONTROL_DEV_GPS1, b"", timeout_ms=100))
+        empty = wait_for(gcs, lambda r: r.type == "SERIAL_CONTROL", 3.0, mark)
+        assert empty is not None and empty.msg.count == 0  # nothing arrived within the timeout
+
+        mark = gcs.mark()
+        gcs.send(_request(M.SERIAL_CONTROL_DEV_GPS2, b"x"))  # not configured
+        gcs.send(_request(M.SERIAL_CONTROL_DEV_SHELL, b"ls\n"))
+        gcs.send(_request(M.SERIAL_CONTROL_DEV_GPS1, b"y", flags=M.SERIAL_CONTROL_FLAG_REPLY))
+        pump([gcs], 0.6)
+        assert gcs.since(mark, "SERIAL_CONTROL") == []
+    finally:
+        os.close(master)
+        os.close(slave)
