@@ -277,7 +277,7 @@ class Autopilot(Actions):
         return Setpoint(Kind.GOTO, lat, lon, center.alt_m, speed)
 
     def _sp_scan(self, s, dt, now) -> Setpoint:
-        return Setpoint(Kind.SCAN)
+        return Setpoint(Kind.SCAN, speed_ms=self.settings.extra.get("scan_rate_dps"))  # deg/s for a tracker
 
     def _sp_track(self, s, dt, now) -> Setpoint:
         if self.tracked is None:

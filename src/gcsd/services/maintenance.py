@@ -44,6 +44,8 @@ SIMULATED_OFFSETS = (4.0, -9.0, 15.0)  # what a compass calibration finds on the
 
 
 class MaintenanceService(Service):
+    capabilities = M.MAV_PROTOCOL_CAPABILITY_COMPASS_CALIBRATION  # DO_START_MAG_CAL and its reports
+
     def __init__(self, node, ftp_root: Path | None = None) -> None:
         self.node = node
         self.ftp_root = ftp_root

@@ -1,7 +1,7 @@
 """Antenna tracker dynamics: it never moves; it points.
 
-POINT aims yaw (pan) and pitch (tilt) at the setpoint's location; SCAN sweeps yaw at
-`yaw_rate_dps` and tilt back and forth between the pitch limits; MANUAL slews with the sticks;
+POINT aims yaw (pan) and pitch (tilt) at the setpoint's location; SCAN sweeps yaw at the
+setpoint's `speed_ms` read as deg/s (SCAN_SPEED_YAW), or `yaw_rate_dps` and tilt back and forth between the pitch limits; MANUAL slews with the sticks;
 anything else holds. Slew rates are `yaw_rate_dps` (pan) and `climb_ms` read as deg/s (tilt).
 """
 
@@ -33,7 +33,7 @@ class TrackerDynamics:
             flat = max(distance_m(s.lat, s.lon, sp.lat, sp.lon), 0.1)
             want_pitch = math.degrees(math.atan2(sp.alt_m - s.alt_amsl_m, flat))
         elif sp.kind == Kind.SCAN:
-            want_yaw = yaw + lim.yaw_rate_dps * dt
+            want_yaw = yaw + (sp.speed_ms or lim.yaw_rate_dps) * dt  # the scan rate, deg/s
             if pitch >= lim.pitch_max_deg - 0.1:
                 self._scan_up = False
             elif pitch <= lim.pitch_min_deg + 0.1:

@@ -1,8 +1,7 @@
 """ArduCopter: MAV_TYPE_QUADROTOR, ArduCopter's modes, a multirotor that hovers.
 
 Parameters (ArduCopter's names and units): WPNAV_SPEED/_UP/_DN, WPNAV_RADIUS, WPNAV_ACCEL
-(cm, cm/s), RTL_ALT, RTL_ALT_FINAL, RTL_SPEED, RTL_LOIT_TIME, LAND_SPEED, LAND_ALT_LOW,
-PILOT_SPEED_UP, LOIT_SPEED, ANGLE_MAX, ATC_SLEW_YAW, CIRCLE_RADIUS, CIRCLE_RATE, GUID_TIMEOUT,
+(cm, cm/s), RTL_ALT, RTL_ALT_FINAL, RTL_SPEED, RTL_LOIT_TIME, LAND_SPEED, LAND_ALT_LOW, LOIT_SPEED, ANGLE_MAX, ATC_SLEW_YAW, CIRCLE_RADIUS, CIRCLE_RATE, GUID_TIMEOUT,
 MOT_THST_HOVER, FS_GCS_ENABLE, FS_GCS_TIMEOUT, plus the shared fence, rally, battery
 failsafe, RC override and SIM_ groups. Commands: NAV_TAKEOFF in GUIDED (armed, on the ground),
 DO_MOTOR_TEST (disarmed).
@@ -32,7 +31,6 @@ PARAMS = (
     P("RTL_LOIT_TIME", INT32, 5000, 0, 60000, "ms", "Pause above home before descending"),
     P("LAND_SPEED", INT16, 50, 30, 200, "cm/s", "Final descent speed"),
     P("LAND_ALT_LOW", INT16, 1000, 100, 10000, "cm", "Height at which the final descent starts"),
-    P("PILOT_SPEED_UP", INT16, 250, 50, 500, "cm/s", "Climb rate with the sticks and in takeoff"),
     P("LOIT_SPEED", INT16, 1250, 20, 3500, "cm/s", "Fastest horizontal speed with the sticks or velocity targets"),
     P("ANGLE_MAX", INT16, 3000, 0, 9000, "cdeg", "Maximum lean angle (pre-arm: 1000..8000)"),
     P("ATC_SLEW_YAW", INT16, 6000, 500, 18000, "cdeg/s", "Yaw rate"),

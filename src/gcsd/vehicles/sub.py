@@ -1,7 +1,7 @@
 """ArduSub: MAV_TYPE_SUBMARINE, ArduSub's modes, a slow vehicle below the surface.
 
 Parameters: WPNAV_SPEED, WPNAV_SPEED_UP, WPNAV_SPEED_DN, WPNAV_RADIUS, WPNAV_ACCEL (cm, cm/s),
-PILOT_SPEED_UP, ANGLE_MAX (cdeg), SURFACE_DEPTH (cm), FS_GCS_ENABLE, plus the shared fence,
+PILOT_SPEED_UP (surfacing), ANGLE_MAX (cdeg), FS_GCS_ENABLE, FS_GCS_TIMEOUT, plus the shared fence,
 battery failsafe, RC override and SIM_ groups (no rally: a sub has no RTL). Commands: no
 takeoff (UNSUPPORTED); LAND means surface.
 """
@@ -26,7 +26,6 @@ PARAMS = (
     P("WPNAV_ACCEL", INT16, 50, 10, 500, "cm/s/s", "Acceleration"),
     P("PILOT_SPEED_UP", INT16, 50, 10, 500, "cm/s", "Ascent rate with the sticks"),
     P("ANGLE_MAX", INT16, 3000, 0, 9000, "cdeg", "Maximum lean angle (pre-arm: 1000..8000)"),
-    P("SURFACE_DEPTH", INT16, -10, -100, 0, "cm", "Depth at which the sub counts as surfaced"),
     P("FS_GCS_ENABLE", INT8, 0, 0, 4, "", "GCS failsafe: 0 off, 1 warn, 2 disarm, 3 depth hold, 4 surface"),
     P("FS_GCS_TIMEOUT", INT8, 5, 0, 30, "s", "GCS heartbeat loss before the failsafe"),
 ) + common.fence_params(alt_max_m=10.0) + common.battery_failsafe_params(0, 0) + common.rc_override_params()
@@ -50,7 +49,6 @@ def settings(get) -> Settings:
         battery_low=common.action(BATTERY_ACTIONS, get("BATT_FS_LOW_ACT")),
         battery_critical=common.action(BATTERY_ACTIONS, get("BATT_FS_CRT_ACT")),
         fence_action=common.action(FENCE_ACTIONS, get("FENCE_ACTION")),
-        extra={"surface_depth_m": cm("SURFACE_DEPTH")},
     )
 
 
