@@ -25,18 +25,18 @@ from .router import ChannelPolicy
 
 MAX_FRAME_BYTES = 280
 UDP_PEER_TIMEOUT_S = 30.0
+# ParseStats field -> the channel counter it is reported as
+_INBOUND = {"frames": "packets_in", "bytes": "bytes_in", "parse_errors": "parse_errors",
+            "crc_errors": "crc_errors", "unknown_ids": "unknown_ids", "seq_gaps": "seq_gaps"}
 
 
 @dataclass
 class ChannelStats:
-    packets_in: int = 0
-    bytes_in: int = 0
+    """Counters the channel owns; what came in (frames, bytes, errors, gaps) is counted by each
+    peer's parser and summed in `Channel.snapshot()`."""
+
     packets_out: int = 0
     bytes_out: int = 0
-    parse_errors: int = 0
-    crc_errors: int = 0
-    unknown_ids: int = 0
-    seq_gaps: int = 0
     signature_rejects: int = 0
     drops: int = 0  # frames not sent for lack of budget or buffer space
     peers_forgotten: int = 0
@@ -128,12 +128,8 @@ class Channel:
 
     def _retire(self, s: ParseStats) -> None:
         r = self._retired
-        r.frames += s.frames
-        r.bytes += s.bytes
-        r.parse_errors += s.parse_errors
-        r.crc_errors += s.crc_errors
-        r.unknown_ids += s.unknown_ids
-        r.seq_gaps += s.seq_gaps
+        for name in _INBOUND:
+            setattr(r, name, getattr(r, name) + getattr(s, name))
 
     def forget_silent_peers(self, now: float, timeout_s: float = UDP_PEER_TIMEOUT_S) -> list[object]:
         gone = [k for k, p in self.peers.items() if now - p.last_rx_s > timeout_s]
@@ -213,12 +209,8 @@ class Channel:
         """Counters of the channel and all its peers, past and present."""
         out = self.stats.as_dict()
         parse = [p.parser.stats for p in self.peers.values()] + [self._retired]
-        out["packets_in"] = sum(s.frames for s in parse)
-        out["bytes_in"] = sum(s.bytes for s in parse)
-        out["parse_errors"] = sum(s.parse_errors for s in parse)
-        out["crc_errors"] = sum(s.crc_errors for s in parse)
-        out["unknown_ids"] = sum(s.unknown_ids for s in parse)
-        out["seq_gaps"] = sum(s.seq_gaps for s in parse)
+        for name, key in _INBOUND.items():
+            out[key] = sum(getattr(s, name) for s in parse)
         out["peers"] = len(self.peers)
         for reason, n in self.signature_reject_reasons.items():
             out[f"signature_rejects_{reason}"] = n
