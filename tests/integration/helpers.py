@@ -17,8 +17,8 @@ import os
 import select
 import socket
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Callable, Iterable
 
 from pymavlink import mavutil
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
@@ -255,3 +255,32 @@ def read_fd(fd: int, seconds: float, sink: bytearray) -> None:
                 sink += os.read(fd, 65536)
             except (BlockingIOError, InterruptedError):
                 pass
+
+
+def download_params(c: Client, timeout: float = 10.0, others: Iterable[Client] = (),
+                    target: tuple[int, int] = VEHICLE) -> dict[int, tuple[str, float, int]]:
+    """A full parameter list as MAVProxy downloads it: PARAM_REQUEST_LIST, then PARAM_REQUEST_READ
+    of up to 10 missing indices after each second without a new value. index -> (name, value, type)."""
+    mark = c.mark()
+    c.send(M.MAVLink_param_request_list_message(*target))
+    got: dict[int, tuple[str, float, int]] = {}
+    count = None
+    deadline = time.monotonic() + timeout
+    last_new = time.monotonic()
+    seen = mark
+    while time.monotonic() < deadline:
+        pump([c, *others], 0.05)
+        for r in c.received[seen:]:
+            if r.type == "PARAM_VALUE" and r.src == target and r.msg.param_index != 65535:
+                count = r.msg.param_count
+                if r.msg.param_index not in got:
+                    got[r.msg.param_index] = (r.msg.param_id, r.msg.param_value, r.msg.param_type)
+                    last_new = time.monotonic()
+        seen = len(c.received)
+        if count is not None and len(got) == count:
+            return got
+        if count is not None and time.monotonic() - last_new > 1.0:
+            for i in [i for i in range(count) if i not in got][:10]:
+                c.send(M.MAVLink_param_request_read_message(*target, b"", i))
+            last_new = time.monotonic()
+    raise AssertionError(f"parameter download incomplete: {len(got)} of {count}")

@@ -32,7 +32,7 @@ from pathlib import Path
 import pytest
 from pymavlink.generator.mavcrc import x25crc
 
-from .helpers import M, Client, pump, rate_hz, wait_for
+from .helpers import Client, M, download_params, pump, rate_hz
 
 pytestmark = pytest.mark.fault
 
@@ -117,29 +117,7 @@ class Daemon:
 
 
 def param_names(c: Client, timeout: float = 20.0, others=()) -> dict[int, tuple[str, float]]:
-    mark = c.mark()
-    c.send(M.MAVLink_param_request_list_message(*VEHICLE))
-    got: dict[int, tuple[str, float]] = {}
-    count = None
-    deadline = time.monotonic() + timeout
-    quiet_since = time.monotonic()
-    seen = mark
-    while time.monotonic() < deadline:
-        pump([c, *others], 0.05)
-        for r in c.received[seen:]:
-            if r.type == "PARAM_VALUE" and r.src == VEHICLE and r.msg.param_index != 65535:
-                count = r.msg.param_count
-                if r.msg.param_index not in got:
-                    got[r.msg.param_index] = (r.msg.param_id, r.msg.param_value)
-                    quiet_since = time.monotonic()
-        seen = len(c.received)
-        if count is not None and len(got) == count:
-            return got
-        if count is not None and time.monotonic() - quiet_since > 1.0:
-            for i in [i for i in range(count) if i not in got][:10]:
-                c.send(M.MAVLink_param_request_read_message(*VEHICLE, b"", i))
-            quiet_since = time.monotonic()
-    raise AssertionError(f"parameter download incomplete: {len(got)} of {count}")
+    return {i: (name, value) for i, (name, value, _type) in download_params(c, timeout, others).items()}
 
 
 def mission_items(n: int) -> list:
@@ -305,7 +283,7 @@ def test_ten_ground_stations_download_parameters_and_the_mission_at_once(tmp_pat
             try:
                 c = clients[i]
                 results[i] = (len(param_names(c)), len(download_mission(c)))
-            except BaseException as exc:  # surfaced below
+            except Exception as exc:  # surfaced below, in the test thread
                 errors.append(exc)
 
         threads = [threading.Thread(target=hammer, args=(i,)) for i in range(10)]

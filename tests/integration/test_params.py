@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from .helpers import M, Client, is_type, pump, rate_hz, udp_channel, udp_url, wait_for
+from .helpers import Client, M, download_params, is_type, pump, rate_hz, udp_channel, udp_url, wait_for
 
 VEHICLE = (1, 1)
 
@@ -29,30 +29,7 @@ def request_list(c: Client) -> int:
 
 
 def download(c: Client, timeout: float = 10.0, others=()) -> dict[int, tuple[str, float, int]]:
-    """Full list download as MAVProxy does it: request, then re-request missing indices after 1 s quiet."""
-    mark = request_list(c)
-    got: dict[int, tuple[str, float, int]] = {}
-    count = None
-    deadline = time.monotonic() + timeout
-    last_new = time.monotonic()
-    seen = mark
-    while time.monotonic() < deadline:
-        pump([c, *others], 0.05)
-        for r in c.received[seen:]:
-            if r.type == "PARAM_VALUE" and r.src == VEHICLE:
-                count = r.msg.param_count
-                if r.msg.param_index != 65535 and r.msg.param_index not in got:
-                    got[r.msg.param_index] = (param_name(r.msg), r.msg.param_value, r.msg.param_type)
-                    last_new = time.monotonic()
-        seen = len(c.received)
-        if count is not None and len(got) == count:
-            return got
-        if count is not None and time.monotonic() - last_new > 1.0:
-            missing = [i for i in range(count) if i not in got][:10]
-            for i in missing:
-                c.send(M.MAVLink_param_request_read_message(*VEHICLE, b"", i))
-            last_new = time.monotonic()
-    raise AssertionError(f"download incomplete: {len(got)} of {count}")
+    return download_params(c, timeout, others)
 
 
 def read_param(c: Client, name: str, timeout: float = 2.0):
