@@ -310,9 +310,81 @@ class LatencyResult:
     mean_ms: float
     router_cpu_pct: float | None
     other_cpu_pct: float = 0.0
+    # paired baseline: the direct path, measured in blocks alternating with the routed ones
+    direct_samples: int = 0
+    direct_p50_ms: float | None = None
+    direct_p99_ms: float | None = None
+    added_p50_ms: float | None = None
+    added_p99_ms: float | None = None
+    blocks: int = 0
+    disturbed_blocks: int = 0  # block pairs thrown away because other processes used > 20 %
 
 
-def measure_latency(path: Path, rate: float, duration_s: float) -> LatencyResult:
+def _latencies_ms(t: Trial) -> list[float]:
+    recv, send = t.report["stamps"], t.send_stamps
+    return [(recv[s] - send[s]) / 1e6 for s in recv if s in send]
+
+
+def _summary(lat: list[float]) -> tuple[float, float, float, float]:
+    lat.sort()
+    if not lat:
+        return (float("nan"),) * 4
+    return percentile(lat, 50), percentile(lat, 99), lat[-1], statistics.fmean(lat)
+
+
+def measure_latency(path: Path, rate: float, duration_s: float, block_s: float = 1.0) -> LatencyResult:
+    """Latency at ``rate``: one-way, sender stamp to receiver stamp.
+
+    For a routed path the direct path (sender straight to the receiver) is measured too, in
+    ``block_s`` blocks alternating with the routed ones (direct-routed, then routed-direct, ...),
+    so that both see the same machine; "added by routing" is routed minus direct, percentile by
+    percentile, over ``duration_s`` of each.  A block pair during which other processes used more
+    than 20 % of a core is discarded and measured again (at most 3 x as many pairs in all; if there
+    are still not enough clean pairs, the disturbed ones are used too and counted as such).
+    """
+    if path.router is None:
+        return _latency_single(path, rate, duration_s)
+    routed_dest = path.sender.call("get_dest")
+    direct_dest = ("127.0.0.1", path.receiver.port)
+    need = max(1, math.ceil(duration_s / block_s))
+    clean: list[dict[str, Trial]] = []
+    disturbed: list[dict[str, Trial]] = []
+    blocks = 0
+    try:
+        while len(clean) < need and blocks < 3 * need:
+            wait_idle(path)
+            pair = {}
+            for kind in (("direct", "routed") if blocks % 2 == 0 else ("routed", "direct")):
+                path.sender.call("dest", direct_dest if kind == "direct" else routed_dest)
+                pair[kind] = run_trial(path, rate, block_s, stamp=True, min_sleep_s=0.0)
+            blocks += 1
+            if path.idle_threshold_pct > 0 and max(t.other_cpu_pct for t in pair.values()) >= INTERFERENCE_PCT:
+                disturbed.append(pair)
+            else:
+                clean.append(pair)
+    finally:
+        path.sender.call("dest", routed_dest)
+    used = clean + (disturbed[: need - len(clean)] if len(clean) < need else [])
+    routed = [x for p in used for x in _latencies_ms(p["routed"])]
+    direct = [x for p in used for x in _latencies_ms(p["direct"])]
+    p50, p99, mx, mean = _summary(routed)
+    d50, d99, _, _ = _summary(direct)
+    n_used = max(1, len(used))
+    r = LatencyResult(
+        rate=rate, samples=len(routed), lost=sum(p["routed"].lost for p in used), p50_ms=p50, p99_ms=p99,
+        max_ms=mx, mean_ms=mean,
+        router_cpu_pct=sum(p["routed"].cpu_pct.get("router", 0.0) for p in used) / n_used,
+        other_cpu_pct=sum(max(t.other_cpu_pct for t in p.values()) for p in used) / n_used,
+        direct_samples=len(direct), direct_p50_ms=d50, direct_p99_ms=d99, added_p50_ms=p50 - d50,
+        added_p99_ms=p99 - d99, blocks=blocks, disturbed_blocks=len(disturbed))
+    log(f"  [{path.name}] latency at {rate:.0f}/s: n={r.samples} lost={r.lost} p50 {p50:.3f} ms p99 {p99:.3f} ms "
+        f"max {mx:.3f} ms; direct (paired) p50 {d50:.3f} p99 {d99:.3f} ms; added p50 {r.added_p50_ms:.3f} "
+        f"p99 {r.added_p99_ms:.3f} ms; {len(used)} block pairs used, {len(disturbed)} disturbed"
+        + (f", OTHER PROCESSES {r.other_cpu_pct:.0f}%" if r.other_cpu_pct >= 5 else ""))
+    return r
+
+
+def _latency_single(path: Path, rate: float, duration_s: float) -> LatencyResult:
     best = None
     for _ in range(INTERFERENCE_RETRIES + 1):  # tail latency is what interference spoils first
         wait_idle(path)
@@ -323,12 +395,8 @@ def measure_latency(path: Path, rate: float, duration_s: float) -> LatencyResult
             break
         log(f"  [{path.name}] latency sample disturbed (other processes {t.other_cpu_pct:.0f}%); repeating")
     t = best
-    recv = t.report["stamps"]
-    send = t.send_stamps
-    lat = sorted((recv[s] - send[s]) / 1e6 for s in recv if s in send)
-    r = LatencyResult(rate=rate, samples=len(lat), lost=t.lost, p50_ms=percentile(lat, 50),
-                      p99_ms=percentile(lat, 99), max_ms=lat[-1] if lat else float("nan"),
-                      mean_ms=statistics.fmean(lat) if lat else float("nan"),
+    p50, p99, mx, mean = _summary(_latencies_ms(t))
+    r = LatencyResult(rate=rate, samples=t.received, lost=t.lost, p50_ms=p50, p99_ms=p99, max_ms=mx, mean_ms=mean,
                       router_cpu_pct=t.cpu_pct.get("router"), other_cpu_pct=t.other_cpu_pct)
     log(f"  [{path.name}] latency at {rate:.0f}/s: n={r.samples} lost={r.lost} p50 {r.p50_ms:.3f} ms "
         f"p99 {r.p99_ms:.3f} ms max {r.max_ms:.3f} ms" + (f" OTHER PROCESSES {r.other_cpu_pct:.0f}%"

@@ -98,6 +98,8 @@ def sender_main(conn) -> None:
         elif cmd == "hb":
             next_hb = beat(time.monotonic())
             conn.send(("ok",))
+        elif cmd == "get_dest":
+            conn.send(("dest", dest))
         elif cmd == "prepare":
             frames_lo, count = args
             frames = factory.frames(frames_lo, count)

@@ -314,9 +314,9 @@ class Runner:
             t = x.get("latency")
             return None if t is None else getattr(t, attr)
 
-        def added(x, attr):
-            v, base = lat(x, attr), lat(d, attr)
-            return None if v is None or base is None else v - base
+        def added(x, attr):  # routed minus the direct path measured in alternating blocks
+            t = x.get("latency")
+            return None if t is None else getattr(t, "added_" + attr)
 
         veh = g.get("vehicle")
         starts = sorted(veh.start_to_heartbeat_s) if veh else []
@@ -373,8 +373,14 @@ class Runner:
                          + (" (sender-limited)" if dt.sender_limited else ""))
         if d.get("latency") is not None:
             dl = d["latency"]
-            extra.append(f"direct-path latency baseline at {LATENCY_RATE} pkt/s: p50 {dl.p50_ms:.3f} ms, "
+            extra.append(f"direct-path latency at {LATENCY_RATE} pkt/s, alone: p50 {dl.p50_ms:.3f} ms, "
                          f"p99 {dl.p99_ms:.3f} ms")
+        for name, x in (("gcsd", g), ("MAVProxy", m)):
+            t = x.get("latency")
+            if t is not None and t.direct_p50_ms is not None:
+                extra.append(f"{name} latency: baseline (direct path, in blocks alternating with the routed ones) "
+                             f"p50 {t.direct_p50_ms:.3f} ms, p99 {t.direct_p99_ms:.3f} ms; {t.blocks} block pairs, "
+                             f"{t.disturbed_blocks} discarded as disturbed; routed max {t.max_ms:.3f} ms")
         for name, x in (("gcsd", g), ("MAVProxy", m)):
             t = x.get("throughput")
             if t is not None and t.sender_limited:
