@@ -39,7 +39,7 @@ from pathlib import Path
 if __package__ in (None, ""):  # run as a script: python bench/swarm.py
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from bench.routers import cpu_seconds, free_udp_port, gcsd_config, start_gcsd  # noqa: E402
+from bench.routers import cpu_seconds, free_udp_port, gcsd_config, start_gcsd
 
 FULL_COUNTS = (1, 50, 100, 150, 200, 250)
 QUICK_COUNTS = (1, 100, 250)

@@ -38,7 +38,8 @@ from __future__ import annotations
 
 import asyncio
 import signal
-from typing import Callable, Protocol, Union, runtime_checkable
+from collections.abc import Callable
+from typing import Protocol, Union, runtime_checkable
 
 from .config import Config
 from .gcs import GCS

@@ -19,13 +19,13 @@ import pytest
 
 pytest.importorskip("mavsdk.asyncio", reason="mavsdk is a test extra: pip install -e .[test]")
 
-from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
-from mavsdk.asyncio.plugins.action import ActionAsync  # noqa: E402
-from mavsdk.asyncio.plugins.mission_raw import MissionItem, MissionRawAsync  # noqa: E402
-from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
-from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
+from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
+from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.mission_raw import MissionItem, MissionRawAsync
+from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.sim.geo import distance_m, offset  # noqa: E402
+from gcsd.sim.geo import distance_m, offset
 
 DISCOVERY_WAIT_S = 5.0
 SPEEDUP = 10

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
+from vehicle_harness import Harness
 
 from gcsd.mission import MissionItem
 from gcsd.sim.geo import distance_m, offset
-from vehicle_harness import Harness
 
 ACCEPTED, FAILED, DENIED = M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_FAILED, M.MAV_RESULT_DENIED
 REL = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT

@@ -6,11 +6,10 @@ from __future__ import annotations
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
+from vehicle_harness import Harness
 
 from gcsd.mission import MissionItem
 from gcsd.sim.geo import offset
-
-from vehicle_harness import Harness
 
 FAILED, ACCEPTED = M.MAV_RESULT_FAILED, M.MAV_RESULT_ACCEPTED
 

@@ -6,9 +6,21 @@ import math
 
 import pytest
 
-from gcsd.sim import (BlimpDynamics, Environment, FixedWingDynamics, GroundDynamics, Kind, Landed, Limits,
-                      MultirotorDynamics, Setpoint, SimulatedVehicle, SubmarineDynamics, TrackerDynamics,
-                      VehicleState)
+from gcsd.sim import (
+    BlimpDynamics,
+    Environment,
+    FixedWingDynamics,
+    GroundDynamics,
+    Kind,
+    Landed,
+    Limits,
+    MultirotorDynamics,
+    Setpoint,
+    SimulatedVehicle,
+    SubmarineDynamics,
+    TrackerDynamics,
+    VehicleState,
+)
 from gcsd.sim.geo import bearing_deg, distance_m, offset, wrap_180
 
 HOME = (-35.363262, 149.165237, 584.0)

@@ -9,9 +9,12 @@ command layer turns that into a MAV_RESULT. Mission DO items dispatch through `D
 
 from __future__ import annotations
 
+import math
+
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..mission.items import MissionItem
+from ..sim.geo import distance_m, wrap_180
 from ..sim.state import Kind, Setpoint
 from .settings import Behaviour as B
 
@@ -111,7 +114,7 @@ class Actions:
         return True
 
     def change_speed(self, speed_ms: float) -> bool:
-        if speed_ms is None or speed_ms < -1.0 or speed_ms != speed_ms:
+        if speed_ms is None or not math.isfinite(speed_ms) or speed_ms < -2.0:
             return False
         if speed_ms > 0:
             self.speed_override = min(speed_ms, max(self.limits.max_speed_ms, self.limits.max_airspeed_ms))
@@ -197,6 +200,47 @@ class Actions:
             value = (pwm - trim) / span if span > 0 else 0.0
             out.append(max(-1.0, min(1.0, -value if get(f"RC{n}_REVERSED") else value)))
         return out[0], out[1], out[2], out[3]
+
+    # --- the mission runner's view -----------------------------------------------------------
+    def mission_items(self):
+        return self.node.mission.mission.stored()
+
+    def current_seq(self) -> int:
+        return self.node.mission.mission.current_seq
+
+    def set_current(self, seq: int) -> None:
+        store = self.node.mission.mission
+        if store.current_seq != seq and store.set_current(seq):
+            for link in self.node.links:
+                link.push(M.MAVLINK_MSG_ID_MISSION_CURRENT)
+
+    def reached(self, seq: int) -> None:
+        self.node.mission.item_reached(seq)
+
+    def rally_items(self):
+        return self.node.mission.rally.stored()
+
+    def _fence_items(self):
+        return self.node.mission.fence.stored()
+
+    def accept_radius_m(self) -> float:
+        return self.settings.accept_radius_m or self.limits.wp_radius_m
+
+    def loiter_radius_m(self) -> float:
+        return self.limits.loiter_radius_m if self.settings.fixed_wing else max(self.limits.wp_radius_m, 1.0)
+
+    def at(self, lat: float, lon: float, alt: float, radius: float, check_alt: bool = True) -> bool:
+        s = self.state
+        if distance_m(s.lat, s.lon, lat, lon) > radius:
+            return False
+        if not check_alt or self.settings.ignore_alt_for_waypoints or self.settings.fixed_wing:
+            return True
+        return abs(s.alt_amsl_m - alt) <= max(TAKEOFF_TOLERANCE_M, radius)
+
+    def yaw_reached(self) -> bool:
+        if self.yaw_target is None or self.settings.fixed_wing:
+            return True
+        return abs(wrap_180(self.yaw_target - self.state.heading_deg)) < 2.0
 
     # --- mission DO items --------------------------------------------------------------------------
     def do_command(self, item: MissionItem) -> None:

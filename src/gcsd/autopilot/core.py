@@ -25,7 +25,7 @@ import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..sim import MAX_STEP_S, SimulatedVehicle
-from ..sim.geo import bearing_deg, distance_m, ne_m, wrap_180
+from ..sim.geo import bearing_deg, distance_m, ne_m
 from ..sim.state import Kind, Setpoint
 from ..vehicles.common import environment
 from .actions import Actions
@@ -33,7 +33,8 @@ from .failsafe import Failsafes
 from .mission import MissionRunner
 from .outputs import Outputs
 from .rtl import Rtl
-from .settings import DISARM, Behaviour as B
+from .settings import DISARM
+from .settings import Behaviour as B
 
 log = structlog.get_logger("gcsd.autopilot")
 
@@ -374,44 +375,3 @@ class Autopilot(Actions):
     def backend_prearm_failures(self) -> list[str]:
         check = getattr(self.backend, "prearm_failures", None)
         return list(check()) if check is not None else []
-
-    # --- the mission runner's view -----------------------------------------------------------
-    def mission_items(self):
-        return self.node.mission.mission.stored()
-
-    def current_seq(self) -> int:
-        return self.node.mission.mission.current_seq
-
-    def set_current(self, seq: int) -> None:
-        store = self.node.mission.mission
-        if store.current_seq != seq and store.set_current(seq):
-            for link in self.node.links:
-                link.push(M.MAVLINK_MSG_ID_MISSION_CURRENT)
-
-    def reached(self, seq: int) -> None:
-        self.node.mission.item_reached(seq)
-
-    def rally_items(self):
-        return self.node.mission.rally.stored()
-
-    def _fence_items(self):
-        return self.node.mission.fence.stored()
-
-    def accept_radius_m(self) -> float:
-        return self.settings.accept_radius_m or self.limits.wp_radius_m
-
-    def loiter_radius_m(self) -> float:
-        return self.limits.loiter_radius_m if self.settings.fixed_wing else max(self.limits.wp_radius_m, 1.0)
-
-    def at(self, lat: float, lon: float, alt: float, radius: float, check_alt: bool = True) -> bool:
-        s = self.state
-        if distance_m(s.lat, s.lon, lat, lon) > radius:
-            return False
-        if not check_alt or self.settings.ignore_alt_for_waypoints or self.settings.fixed_wing:
-            return True
-        return abs(s.alt_amsl_m - alt) <= max(TAKEOFF_TOLERANCE_M, radius)
-
-    def yaw_reached(self) -> bool:
-        if self.yaw_target is None or self.settings.fixed_wing:
-            return True
-        return abs(wrap_180(self.yaw_target - self.state.heading_deg)) < 2.0

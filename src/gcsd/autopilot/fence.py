@@ -9,8 +9,8 @@ empty set means inside. MAVLink's FENCE_BREACH codes for FENCE_STATUS come from 
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Callable, Iterable
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
@@ -32,7 +32,7 @@ class FenceConfig:
     margin_m: float = 2.0
 
     @classmethod
-    def from_params(cls, get: Callable[[str], float]) -> "FenceConfig":
+    def from_params(cls, get: Callable[[str], float]) -> FenceConfig:
         return cls(bool(get("FENCE_ENABLE")), int(get("FENCE_TYPE")), float(get("FENCE_ALT_MAX")),
                    float(get("FENCE_ALT_MIN")), float(get("FENCE_RADIUS")), float(get("FENCE_MARGIN")))
 

@@ -173,9 +173,9 @@ class FlightService(Service):
         if not self._for_us(inc):
             return
         yaw = None if m.type_mask & YAW_IGNORED else math.degrees(m.yaw)
-        if not m.type_mask & POSITION_IGNORED == POSITION_IGNORED:
+        if m.type_mask & POSITION_IGNORED != POSITION_IGNORED:
             self.ap.goto(m.lat_int / 1e7, m.lon_int / 1e7, self._alt(m.alt, m.coordinate_frame), yaw_deg=yaw)
-        elif not m.type_mask & VELOCITY_IGNORED == VELOCITY_IGNORED:
+        elif m.type_mask & VELOCITY_IGNORED != VELOCITY_IGNORED:
             self.ap.velocity(m.vx, m.vy, m.vz, yaw, inc.now)
 
     def handle_SET_POSITION_TARGET_LOCAL_NED(self, inc: Incoming) -> None:
@@ -187,7 +187,7 @@ class FlightService(Service):
         body = m.coordinate_frame in (M.MAV_FRAME_BODY_NED, M.MAV_FRAME_BODY_OFFSET_NED, M.MAV_FRAME_BODY_FRD)
         c, sn = math.cos(s.yaw_rad), math.sin(s.yaw_rad)
         rotate = (lambda x, y: (x * c - y * sn, x * sn + y * c)) if body else (lambda x, y: (x, y))
-        if not m.type_mask & POSITION_IGNORED == POSITION_IGNORED:
+        if m.type_mask & POSITION_IGNORED != POSITION_IGNORED:
             north, east = rotate(m.x, m.y)
             if m.coordinate_frame == M.MAV_FRAME_LOCAL_NED:
                 lat, lon = offset(s.home_lat, s.home_lon, north, east)
@@ -196,7 +196,7 @@ class FlightService(Service):
                 lat, lon = offset(s.lat, s.lon, north, east)
                 alt = s.alt_amsl_m - m.z
             self.ap.goto(lat, lon, alt, yaw_deg=yaw)
-        elif not m.type_mask & VELOCITY_IGNORED == VELOCITY_IGNORED:
+        elif m.type_mask & VELOCITY_IGNORED != VELOCITY_IGNORED:
             vn, ve = rotate(m.vx, m.vy)
             self.ap.velocity(vn, ve, m.vz, yaw, inc.now)
 

@@ -10,8 +10,8 @@ TEMPORARILY_REJECTED. Durations are real seconds: calibrating does not go faster
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 

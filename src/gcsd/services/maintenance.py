@@ -22,6 +22,7 @@
 
 from __future__ import annotations
 
+import math
 import shutil
 from pathlib import Path
 
@@ -64,7 +65,7 @@ class MaintenanceService(Service):
     def calibration(self, req: CommandRequest) -> int:
         if self.node.state.armed:
             return LATER
-        p = [round(v) if v == v else 0 for v in (req.param1, req.param2, req.param3, req.param4, req.x, req.y)]
+        p = [round(v) if math.isfinite(v) else 0 for v in (req.param1, req.param2, req.param3, req.param4, req.x, req.y)]
         texts = []
         if p[0] == 1:
             texts.append("Gyro calibration complete")
@@ -134,7 +135,7 @@ class MaintenanceService(Service):
         return ACCEPTED
 
     def reboot(self, req: CommandRequest) -> int:
-        what = round(req.param1) if req.param1 == req.param1 else -1
+        what = round(req.param1) if math.isfinite(req.param1) else -1
         if what == 0:
             return ACCEPTED
         if what not in (1, 3):

@@ -16,8 +16,8 @@ request opens it again.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
@@ -86,6 +86,14 @@ class SerialPassthrough:
             self._close(device)
             return False
 
+    def _read(self, device: int, port) -> bytes:
+        try:
+            return bytes(port.read(CHUNK))
+        except Exception as exc:  # noqa: BLE001  (a vanished device must not take the node down)
+            log.warning("serial_control_io_failed", device=self.config[device].device, error=str(exc))
+            self._close(device)
+            return b""
+
     def _close(self, device: int) -> None:
         port = self.ports.pop(device, None)
         if port is not None:
@@ -103,10 +111,7 @@ class SerialPassthrough:
             port = self.ports.get(w.device)
             if port is not None and now < w.deadline_s and getattr(port, "in_waiting", 0) < CHUNK:
                 continue
-            got: list[bytes] = []
-            if port is not None:
-                self._io(w.device, lambda: got.append(port.read(CHUNK)))
-            data = got[0] if got else b""
+            data = self._read(w.device, port) if port is not None else b""
             out.append(M.MAVLink_serial_control_message(w.device, M.SERIAL_CONTROL_FLAG_REPLY, 0, 0, len(data),
                                                         list(data.ljust(CHUNK, b"\0"))))
             if not (w.multi and len(data) == CHUNK):

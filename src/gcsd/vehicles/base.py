@@ -16,8 +16,8 @@ docs/vehicles.md.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 

@@ -8,8 +8,10 @@ shared groups. Commands: NAV_TAKEOFF in VELOCITY or LOITER (armed, on the ground
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from ..autopilot.settings import DISARM, Behaviour as B, Settings
-from ..params.store import INT8, REAL32, ParamDef as P
+from ..autopilot.settings import DISARM, Settings
+from ..autopilot.settings import Behaviour as B
+from ..params.store import INT8, REAL32
+from ..params.store import ParamDef as P
 from ..sim import BlimpDynamics, Limits
 from . import commands, common, prearm
 from .base import VehicleType, modes_named, stream_rates

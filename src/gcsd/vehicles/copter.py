@@ -10,8 +10,10 @@ DO_MOTOR_TEST (disarmed).
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from ..autopilot.settings import DISARM, Behaviour as B, Settings
-from ..params.store import INT8, INT16, INT32, REAL32, ParamDef as P
+from ..autopilot.settings import DISARM, Settings
+from ..autopilot.settings import Behaviour as B
+from ..params.store import INT8, INT16, INT32, REAL32
+from ..params.store import ParamDef as P
 from ..sim import Limits, MultirotorDynamics
 from . import commands, common, prearm
 from .base import VehicleType, modes_named, stream_rates
@@ -50,7 +52,7 @@ FENCE_ACTIONS = {1: "RTL", 2: "LAND", 3: "RTL", 4: "BRAKE", 5: "RTL", 6: "LAND",
 
 
 def settings(get) -> Settings:
-    cm = lambda name: float(get(name)) / 100.0  # noqa: E731
+    cm = lambda name: float(get(name)) / 100.0
     limits = Limits(
         cruise_speed_ms=cm("WPNAV_SPEED"), max_speed_ms=max(cm("LOIT_SPEED"), cm("WPNAV_SPEED")),
         accel_ms2=cm("WPNAV_ACCEL"), climb_ms=cm("WPNAV_SPEED_UP"), descent_ms=cm("WPNAV_SPEED_DN"),

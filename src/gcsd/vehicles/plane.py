@@ -11,8 +11,10 @@ mission ends in RTL, as ArduPlane's does.
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from ..autopilot.settings import DISARM, Behaviour as B, Settings
-from ..params.store import INT8, INT16, INT32, REAL32, ParamDef as P
+from ..autopilot.settings import DISARM, Settings
+from ..autopilot.settings import Behaviour as B
+from ..params.store import INT8, INT16, INT32, REAL32
+from ..params.store import ParamDef as P
 from ..sim import FixedWingDynamics, Limits
 from . import commands, common, prearm
 from .base import VehicleType, modes_named, stream_rates

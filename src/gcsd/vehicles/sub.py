@@ -9,8 +9,10 @@ takeoff (UNSUPPORTED); LAND means surface.
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from ..autopilot.settings import DISARM, Behaviour as B, Settings
-from ..params.store import INT8, INT16, ParamDef as P
+from ..autopilot.settings import DISARM, Settings
+from ..autopilot.settings import Behaviour as B
+from ..params.store import INT8, INT16
+from ..params.store import ParamDef as P
 from ..sim import Limits, SubmarineDynamics
 from . import common, prearm
 from .base import VehicleType, modes_named, stream_rates
@@ -36,7 +38,7 @@ FENCE_ACTIONS = {1: "SURFACE", 2: "ALT_HOLD"}
 
 
 def settings(get) -> Settings:
-    cm = lambda name: float(get(name)) / 100.0  # noqa: E731
+    cm = lambda name: float(get(name)) / 100.0
     limits = Limits(
         cruise_speed_ms=cm("WPNAV_SPEED"), max_speed_ms=cm("WPNAV_SPEED") * 1.5, accel_ms2=cm("WPNAV_ACCEL"),
         climb_ms=cm("WPNAV_SPEED_UP"), descent_ms=cm("WPNAV_SPEED_DN"), land_speed_ms=cm("PILOT_SPEED_UP"),

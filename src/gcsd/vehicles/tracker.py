@@ -10,8 +10,10 @@ holds; MANUAL follows the sticks. Parameters: YAW_SLEW_TIME, PITCH_SLEW_TIME (s 
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from ..autopilot.settings import Behaviour as B, Settings
-from ..params.store import INT16, REAL32, ParamDef as P
+from ..autopilot.settings import Behaviour as B
+from ..autopilot.settings import Settings
+from ..params.store import INT16, REAL32
+from ..params.store import ParamDef as P
 from ..sim import Limits, TrackerDynamics
 from . import common, prearm
 from .base import VehicleType, modes_named, stream_rates
