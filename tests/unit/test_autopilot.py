@@ -285,3 +285,23 @@ def test_high_latency_links_are_silent_until_control_high_latency(tmp_path):
     assert "HIGH_LATENCY2" in kinds and "HEARTBEAT" not in kinds and "ATTITUDE" not in kinds
     assert len(h.of_type("HIGH_LATENCY2")) == 2
     assert h.command(M.MAV_CMD_CONTROL_HIGH_LATENCY, 2) == FAILED
+
+
+def test_do_jump_tag_continues_the_mission_from_its_tag(tmp_path):
+    h = flying(tmp_path)
+    plan(h, wp(h, 30, 0), MissionItem(M.MAV_CMD_JUMP_TAG, param1=7), wp(h, 0, 10))
+    h.mode("AUTO")
+    h.run(1.0)
+    assert h.node.mission.current_message().seq == 1
+    assert h.command(M.MAV_CMD_DO_JUMP_TAG, 7) == ACCEPTED
+    assert h.command(M.MAV_CMD_DO_JUMP_TAG, 8) == FAILED
+    assert h.run(60, until=lambda: 3 in reached(h))
+    assert reached(h) == [3]  # item 1 was skipped
+
+
+def test_fixed_mag_cal_yaw_saves_offsets_that_pass_the_compass_check(tmp_path):
+    h = Harness(tmp_path)
+    h.set_param("COMPASS_OFS_X", 2500.0)
+    assert h.command(M.MAV_CMD_FIXED_MAG_CAL_YAW, 90) == ACCEPTED
+    assert abs(h.node.params.get("COMPASS_OFS_X")) < 100
+    assert h.arm() == ACCEPTED

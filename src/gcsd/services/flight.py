@@ -6,7 +6,8 @@ that mode), MISSION_START (param1 first item), DO_REPOSITION (COMMAND_INT: a gui
 param2 bit 0 switches to GUIDED first, else DENIED outside guided), DO_CHANGE_SPEED (param2
 m/s), DO_CHANGE_ALTITUDE, DO_SET_HOME (param1 1: here), DO_SET_ROI / DO_SET_ROI_LOCATION /
 DO_SET_ROI_NONE, CONDITION_YAW, DO_PAUSE_CONTINUE, DO_SET_SERVO, DO_REPEAT_SERVO,
-DO_SET_RELAY, DO_REPEAT_RELAY, DO_FENCE_ENABLE, DO_FLIGHTTERMINATION. The vehicle type adds
+DO_SET_RELAY, DO_REPEAT_RELAY, DO_FENCE_ENABLE, DO_FLIGHTTERMINATION, DO_JUMP_TAG (to the mission's JUMP_TAG item
+with that tag). The vehicle type adds
 its own (takeoff, motor test...). A command the autopilot cannot do now gets FAILED.
 
 Messages: SET_POSITION_TARGET_GLOBAL_INT and SET_POSITION_TARGET_LOCAL_NED (positions or
@@ -65,6 +66,7 @@ class FlightService(Service):
             M.MAV_CMD_DO_PAUSE_CONTINUE: self.pause_continue, M.MAV_CMD_DO_SET_SERVO: self.set_servo,
             M.MAV_CMD_DO_REPEAT_SERVO: self.repeat_servo, M.MAV_CMD_DO_SET_RELAY: self.set_relay,
             M.MAV_CMD_DO_REPEAT_RELAY: self.repeat_relay, M.MAV_CMD_DO_FLIGHTTERMINATION: self.terminate,
+            M.MAV_CMD_DO_JUMP_TAG: self.jump_tag,
         }
         if "FENCE_ENABLE" in self.node.params:
             table[M.MAV_CMD_DO_FENCE_ENABLE] = self.fence_enable
@@ -85,6 +87,15 @@ class FlightService(Service):
 
     def loiter(self, req: CommandRequest) -> int:
         return self._mode("LOITER")
+
+    def jump_tag(self, req: CommandRequest) -> int:
+        """DO_JUMP_TAG: the mission continues from its JUMP_TAG item with this tag (param1)."""
+        store = self.node.mission.mission
+        for seq, item in enumerate(store.stored()):
+            if item.command == M.MAV_CMD_JUMP_TAG and item.param1 == req.param1 and seq > 0:
+                self.ap.set_current(seq)
+                return ACCEPTED
+        return FAILED
 
     def mission_start(self, req: CommandRequest) -> int:
         return _result(self.ap.start_mission(int(req.param1) if math.isfinite(req.param1) else 0))

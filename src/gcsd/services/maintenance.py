@@ -18,6 +18,7 @@
 - DO_START_MAG_CAL, DO_ACCEPT_MAG_CAL, DO_CANCEL_MAG_CAL: a simulated compass calibration:
   MAG_CAL_PROGRESS every second for MAG_CAL_S, then MAG_CAL_REPORT with the offsets found;
   saved into COMPASS_OFS_X/Y/Z when accepted (or at once with autosave, param3 1).
+  FIXED_MAG_CAL_YAW saves them at once (disarmed).
 """
 
 from __future__ import annotations
@@ -59,6 +60,7 @@ class MaintenanceService(Service):
             M.MAV_CMD_PREFLIGHT_STORAGE: self.storage, M.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN: self.reboot,
             M.MAV_CMD_RUN_PREARM_CHECKS: self.run_prearm_checks, M.MAV_CMD_DO_START_MAG_CAL: self.start_mag_cal,
             M.MAV_CMD_DO_ACCEPT_MAG_CAL: self.accept_mag_cal, M.MAV_CMD_DO_CANCEL_MAG_CAL: self.cancel_mag_cal,
+            M.MAV_CMD_FIXED_MAG_CAL_YAW: self.fixed_mag_cal_yaw,
         }
 
     # --- calibration -------------------------------------------------------------------------
@@ -181,6 +183,14 @@ class MaintenanceService(Service):
 
     def cancel_mag_cal(self, req: CommandRequest) -> int:
         self.mag_cal = None
+        return ACCEPTED
+
+    def fixed_mag_cal_yaw(self, req: CommandRequest) -> int:
+        """FIXED_MAG_CAL_YAW: calibrate from a known heading at once (the vehicle must be still)."""
+        if self.node.state.armed or "COMPASS_OFS_X" not in self.node.params:
+            return FAILED
+        self._save_offsets()
+        self.node.send_text(M.MAV_SEVERITY_INFO, f"Mag cal from yaw {req.param1:.0f}: offsets saved")
         return ACCEPTED
 
     def _save_offsets(self) -> None:
