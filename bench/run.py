@@ -2,7 +2,7 @@
 
     python -m bench                      # everything (about 5 minutes on an idle machine)
     python -m bench --quick              # smoke run (about 1 minute)
-    python -m bench throughput latency   # just these; also: harness, vehicle, params, mission
+    python -m bench throughput latency   # just these; also: harness, vehicle, params, mission, signing
     python -m bench --routers mavproxy   # only one router (gcsd, mavproxy, or both: gcsd,mavproxy)
 
 Progress goes to stderr; the result table to stdout; ``--json FILE`` saves every figure and trial.
@@ -29,6 +29,7 @@ if __package__ in (None, ""):  # run as a script: python bench/run.py
 
 from bench import measure  # noqa: E402
 from bench import mission as bench_mission  # noqa: E402
+from bench import signing as bench_signing  # noqa: E402
 from bench import swarm as bench_swarm  # noqa: E402
 from bench import params as bench_params  # noqa: E402
 from bench.measure import Path, SeqAllocator, log  # noqa: E402
@@ -44,7 +45,7 @@ from bench.routers import (  # noqa: E402
     start_mavproxy,
 )
 
-WHAT = ("harness", "throughput", "latency", "vehicle", "params", "mission", "swarm")
+WHAT = ("harness", "throughput", "latency", "vehicle", "params", "mission", "signing", "swarm")
 LATENCY_RATE = 1000
 
 
@@ -207,13 +208,13 @@ class Runner:
     # ----------------------------------------------------------------------------- measurements
     def run(self) -> None:
         a = self.a
-        if "gcsd" in a.routers or a.what & {"vehicle", "params", "mission"}:
+        if "gcsd" in a.routers or a.what & {"vehicle", "params", "mission", "signing"}:
             ok, text = gcsd_available(self.gcsd_env)
             self.res["gcsd_version"] = text
             if not ok:
                 self.notes.append(f"gcsd not runnable ({text}); its columns are n/a")
                 a.routers = [r for r in a.routers if r != "gcsd"]
-                a.what -= {"vehicle", "params", "mission"}
+                a.what -= {"vehicle", "params", "mission", "signing"}
                 log(f"gcsd not runnable: {text}")
         if a.what & {"harness", "throughput", "latency"}:
             self.harness()
@@ -226,6 +227,8 @@ class Runner:
             self.params()
         if "mission" in a.what:
             self.mission()
+        if "signing" in a.what:
+            self.res["signing"] = bench_signing.measure_signing(self)
         if "swarm" in a.what:
             self.res["swarm"] = bench_swarm.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
 
@@ -412,6 +415,8 @@ class Runner:
         if self.res.get("mission"):
             out += ["", "Missions: 1 000 items uploaded and downloaded by MAVSDK mission_raw, gcsd against MAVSDK's "
                     "mission_raw_server (bench/mission.py)", "", bench_mission.table(self.res["mission"])]
+        if self.res.get("signing"):
+            out += ["", bench_signing.table(self.res["signing"])]
         if self.res.get("swarm"):
             out += ["", bench_swarm.table(self.res["swarm"])]
         return "\n".join(out)
