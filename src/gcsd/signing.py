@@ -15,6 +15,10 @@ Incoming, per frame (`check`):
   marked unsigned_ok it is accepted; otherwise it is refused when `require` is set, and accepted
   when it is not (SPEC.md: `require: false` is the permissive default).
 - Signed frame but no key: refused when `require` is set (it cannot be checked), else accepted.
+- On an unsigned_ok channel (a trusted link) a signed frame that fails these checks is accepted
+  as if it were unsigned, as ArduPilot does on its USB channel: unsigned frames are accepted
+  there anyway, and a ground station whose key got out of step (MAVProxy switches keys even
+  when a SETUP_SIGNING is refused) must not be locked out of the one link meant to fix it.
 
 Outgoing: `next_timestamp()` for each packet signed on a channel whose output is MAVLink2.
 
@@ -87,9 +91,13 @@ class Signing:
             if msgid == MSG_ID_RADIO_STATUS or msgid == MSG_ID_RADIO or unsigned_ok:
                 return None
             return UNSIGNED if self.require else None
+        reason = self._check_signed(raw, sysid, compid)
+        return None if unsigned_ok else reason
+
+    def _check_signed(self, raw: bytes, sysid: int, compid: int) -> str | None:
         key = self.key
         if key is None:
-            return NO_KEY if self.require and not unsigned_ok else None
+            return NO_KEY if self.require else None
         if not hmac.compare_digest(signature_of(key, raw[:-6]), raw[-6:]):
             return BAD_SIGNATURE
         link_id = raw[-SIG_LEN]

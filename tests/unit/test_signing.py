@@ -128,3 +128,17 @@ def test_manager_warns_at_most_once_per_ten_seconds_per_channel(tmp_path):
     m = SigningManager(None, False, None, WALL)
     assert [m.should_warn(0, t) for t in (0.0, 5.0, 10.5)] == [True, False, True]
     assert m.should_warn(1, 5.0)
+
+
+def test_unsigned_ok_channel_accepts_a_frame_signed_with_a_wrong_key_as_unsigned():
+    s = Signing(KEY, NOW, require=True)
+    assert check(s, signed_frame(key=bytes(32 * [7])), unsigned_ok=True) is None
+    assert check(s, signed_frame(key=bytes(32 * [7]))) == BAD_SIGNATURE
+
+
+def test_a_valid_signature_on_an_unsigned_ok_channel_still_advances_the_stream():
+    s = Signing(KEY, NOW)
+    raw = signed_frame(timestamp=NOW + 50)
+    assert check(s, raw, unsigned_ok=True) is None
+    assert s.timestamp == NOW + 50
+    assert check(s, raw) == REPLAY
