@@ -7,7 +7,7 @@ failsafe, RC override and SIM_ groups. Commands: NAV_TAKEOFF in GUIDED (armed, o
 DO_MOTOR_TEST (disarmed).
 """
 
-from pymavlink import mavutil
+from .modes import mode_mapping
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import DISARM, Settings
@@ -18,7 +18,7 @@ from ..sim import Limits, MultirotorDynamics
 from . import commands, common, prearm
 from .base import VehicleType, modes_named, stream_rates
 
-_modes = dict(mavutil.mode_mapping_acm)
+_modes = mode_mapping("acm")
 _by_name = {v: k for k, v in _modes.items()}
 
 PARAMS = (

@@ -8,7 +8,7 @@ TAKEOFF mode with its altitude; DO_LAND_START jumps to the mission's landing seq
 mission ends in RTL, as ArduPlane's does.
 """
 
-from pymavlink import mavutil
+from .modes import mode_mapping
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import DISARM, Settings
@@ -19,7 +19,7 @@ from ..sim import FixedWingDynamics, Limits
 from . import commands, common, prearm
 from .base import VehicleType, modes_named, stream_rates
 
-_modes = dict(mavutil.mode_mapping_apm)
+_modes = mode_mapping("apm")
 _by_name = {v: k for k, v in _modes.items()}
 
 PARAMS = (

@@ -6,7 +6,7 @@ battery failsafe, RC override and SIM_ groups (no rally: a sub has no RTL). Comm
 takeoff (UNSUPPORTED); LAND means surface.
 """
 
-from pymavlink import mavutil
+from .modes import mode_mapping
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import DISARM, Settings
@@ -17,7 +17,7 @@ from ..sim import Limits, SubmarineDynamics
 from . import common, prearm
 from .base import VehicleType, modes_named, stream_rates
 
-_modes = dict(mavutil.mode_mapping_sub)
+_modes = mode_mapping("sub")
 _by_name = {v: k for k, v in _modes.items()}
 
 PARAMS = (
