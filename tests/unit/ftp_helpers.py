@@ -41,12 +41,35 @@ class Gcs:
         assert len(replies) == 1, replies
         return replies[0]
 
-    def pump(self, now: float = 0.0, max_packets: int = 10_000) -> list[Payload]:
-        return self._decode(self.server.pump(self.channel, now, max_packets))
+    def pump(self, now: float = 0.0, max_packets: int = 100_000) -> list[Payload]:
+        """What the server sends from `now` on, the clock following its deadlines, until the
+        running bursts and CRCs are done or max_packets are out."""
+        out = []
+        while len(out) < max_packets:
+            out += self.server.pump(self.channel, now, max_packets - len(out))
+            if not self.server.has_work(self.channel):
+                break
+            now = max(now, self.server.next_deadline(now, self.channel))
+        return self._decode(out)
 
     def burst(self, offset: int = 0, block: int = 0, now: float = 0.0) -> list[Payload]:
         assert self.request(Op.BURST_READ_FILE, size=block, offset=offset, now=now) == []
         return self.pump(now)
+
+    def download(self, block: int = 0, now: float = 0.0) -> bytes:
+        """The open file, read with as many bursts as it takes (each packet placed at its offset)."""
+        data = bytearray()
+        offset = 0
+        while True:
+            packets = self.burst(offset=offset, block=block, now=now)
+            for p in packets:
+                if p.opcode == Op.ACK:
+                    data[p.offset:p.offset + p.size] = p.data[:p.size]
+                elif Nak(p.data[0]) == Nak.EOF:
+                    return bytes(data)
+                else:
+                    raise AssertionError(f"burst failed: {p}")
+            offset = len(data)
 
     def _decode(self, outgoing) -> list[Payload]:
         for out in outgoing:

@@ -226,8 +226,7 @@ def test_open_reports_the_exact_size_for_239_byte_reads_and_announces_the_downlo
     expected = encode(params.params, 300, PckQuery(with_defaults=True))
     assert int.from_bytes(reply.data[:4], "little") == len(expected)
     assert params.downloads == 1
-    packets = gcs.burst(block=239)
-    assert b"".join(p.data[:p.size] for p in packets if is_ack(p)) == expected
+    assert gcs.download(block=239) == expected
 
 
 def test_a_leading_slash_before_the_virtual_root_is_ignored(gcs):
@@ -236,9 +235,8 @@ def test_a_leading_slash_before_the_virtual_root_is_ignored(gcs):
 
 def test_the_first_read_fixes_the_block_size_for_the_handle(gcs, params):
     gcs.one(Op.OPEN_FILE_RO, b"@PARAM/param.pck")
-    packets = gcs.burst(block=80)
     expected = encode(params.params, 300, block=80)
-    assert b"".join(p.data[:p.size] for p in packets if is_ack(p)) == expected
+    assert gcs.download(block=80) == expected
     assert gcs.one(Op.READ_FILE, size=80, offset=160).data[:80] == expected[160:240]
     reply = gcs.one(Op.READ_FILE, size=100, offset=160)
     assert errno_of(reply) == errno.EINVAL

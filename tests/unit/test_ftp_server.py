@@ -11,7 +11,9 @@ import pytest
 from ftp_helpers import Gcs, errno_of, is_ack, make_server, nak_code
 
 from gcsd.ftp.protocol import DATA_MAX, Nak, Op, Payload, crc32_ardupilot
-from gcsd.ftp.server import BURST_PACKETS, MAX_SESSIONS, SESSION_IDLE_S
+from gcsd.ftp.burst import (ADD_PPS, BURST_PACKETS, HOLD_PACKETS, MAX_PPS, MIN_PPS, PROBE_PACKETS, SLACK_S,
+                            START_PPS)
+from gcsd.ftp.server import MAX_SESSIONS, SESSION_IDLE_S
 
 
 @pytest.fixture
@@ -346,11 +348,22 @@ def test_crc32_of_a_missing_file_is_file_not_found(gcs):
 # --- BurstReadFile ---------------------------------------------------------------------------
 
 
+def distinct(packets):
+    """The burst without the second copy of each burst_complete packet."""
+    out = []
+    for p in packets:
+        if out and p == out[-1]:
+            assert p.burst_complete == 1, p
+            continue
+        out.append(p)
+    return out
+
+
 def test_burst_honours_the_requested_block_size_and_ends_short_then_eof(gcs, root):
     data = os.urandom(1000)
     (root / "f").write_bytes(data)
     opened(gcs, b"f")
-    packets = gcs.burst(block=80)
+    packets = distinct(gcs.burst(block=80))
     assert [p.offset for p in packets[:-1]] == list(range(0, 1000, 80))
     assert all(p.size == 80 and p.burst_complete == 0 for p in packets[:-2])
     short, eof = packets[-2:]
@@ -361,17 +374,26 @@ def test_burst_honours_the_requested_block_size_and_ends_short_then_eof(gcs, roo
     assert [p.seq for p in packets] == list(range(1 + 1, 1 + 1 + len(packets)))  # request seq was 1
 
 
+def test_every_burst_complete_packet_is_sent_twice_with_the_same_seq(gcs, root):
+    (root / "f").write_bytes(b"x" * 100)
+    opened(gcs, b"f")
+    packets = gcs.burst(block=80)
+    assert [(p.opcode, p.offset, p.burst_complete) for p in packets] == [
+        (Op.ACK, 0, 0), (Op.ACK, 80, 1), (Op.ACK, 80, 1), (Op.NAK, 100, 1), (Op.NAK, 100, 1)]
+    assert packets[1] == packets[2] and packets[3] == packets[4]
+
+
 def test_burst_block_size_0_means_239(gcs, root):
     (root / "f").write_bytes(b"x" * 500)
     opened(gcs, b"f")
-    packets = gcs.burst(block=0)
+    packets = distinct(gcs.burst(block=0))
     assert [p.size for p in packets[:-1]] == [239, 239, 22]
 
 
 def test_burst_reading_exactly_to_the_end_sends_a_full_chunk_then_eof(gcs, root):
     (root / "f").write_bytes(b"x" * 160)
     opened(gcs, b"f")
-    packets = gcs.burst(block=80)
+    packets = distinct(gcs.burst(block=80))
     assert [(p.opcode, p.size, p.burst_complete) for p in packets] == [
         (Op.ACK, 80, 0), (Op.ACK, 80, 0), (Op.NAK, 1, 1)]
     assert packets[-1].offset == 160
@@ -385,10 +407,10 @@ def test_burst_starts_at_the_requested_offset(gcs, root):
     assert packets[0].offset == 250 and packets[0].data[:50] == data[250:]
 
 
-def test_burst_stops_after_500_packets_with_burst_complete(gcs, root):
+def test_burst_ends_after_burst_packets_with_burst_complete(gcs, root):
     (root / "f").write_bytes(b"y" * (BURST_PACKETS * 10 + 100))
     opened(gcs, b"f")
-    packets = gcs.burst(block=10)
+    packets = distinct(gcs.burst(block=10))
     assert len(packets) == BURST_PACKETS
     assert packets[-1].burst_complete == 1 and all(p.burst_complete == 0 for p in packets[:-1])
     assert not gcs.server.has_work(0)
@@ -403,6 +425,71 @@ def test_pump_gives_at_most_the_packets_asked_for(gcs, root):
     assert gcs.pump(max_packets=10_000)[0].offset == 700
 
 
+def intervals(gcs: Gcs, count: int, now: float = 0.0) -> list[float]:
+    """The send times of the next `count` burst packets, pumped one at a time at their due time."""
+    times = []
+    for _ in range(count):
+        assert len(gcs.server.pump(0, now, 1)) == 1
+        times.append(now)
+        now = gcs.server.next_deadline(now, 0)
+    return [b - a for a, b in zip(times, times[1:])]
+
+
+def test_burst_packets_are_paced_from_the_start_rate(gcs, root):
+    (root / "f").write_bytes(b"p" * 100_000)
+    opened(gcs, b"f")
+    assert gcs.request(Op.BURST_READ_FILE, size=100) == []
+    early = gcs.server.pump(0, 0.0, 10_000)
+    assert abs(len(early) - SLACK_S * START_PPS) <= 1  # what is due within the slack
+    assert gcs.server.next_deadline(0.0, 0) == pytest.approx(len(early) / START_PPS)
+    assert gcs.server.pump(0, 0.0, 10_000) == []  # nothing more until then
+
+
+def test_the_rate_grows_by_500_per_s_after_100_packets_without_loss(gcs, root):
+    (root / "f").write_bytes(b"p" * 100_000)
+    opened(gcs, b"f")
+    gcs.request(Op.BURST_READ_FILE, size=100)
+    gaps = intervals(gcs, PROBE_PACKETS + 3)
+    assert gaps[0] == pytest.approx(1 / START_PPS)
+    assert gaps[-1] == pytest.approx(1 / (START_PPS + ADD_PPS))
+
+
+def test_a_request_for_an_offset_the_burst_passed_halves_the_rate(gcs, root):
+    (root / "f").write_bytes(b"p" * 100_000)
+    opened(gcs, b"f")
+    gcs.request(Op.BURST_READ_FILE, size=100)
+    intervals(gcs, HOLD_PACKETS + 1)
+    assert is_ack(gcs.one(Op.READ_FILE, size=100, offset=1000))  # a gap the client wants again
+    assert is_ack(gcs.one(Op.READ_FILE, size=100, offset=1100))  # same batch: no second halving
+    now = gcs.server.next_deadline(0.0, 0)
+    assert intervals(gcs, 3, now)[-1] == pytest.approx(2 / START_PPS)
+
+
+def test_the_rate_falls_no_lower_than_its_minimum(gcs, root):
+    (root / "f").write_bytes(b"p" * 1_000_000)
+    opened(gcs, b"f")
+    gcs.request(Op.BURST_READ_FILE, size=100)
+    now = 0.0
+    for _ in range(12):
+        intervals(gcs, HOLD_PACKETS, now)
+        now = gcs.server.next_deadline(now, 0)
+        gcs.one(Op.READ_FILE, size=100, offset=0, now=now)
+    assert intervals(gcs, 3, gcs.server.next_deadline(now, 0))[-1] == pytest.approx(1 / MIN_PPS)
+
+
+def test_the_rate_grows_no_higher_than_its_maximum_and_carries_over_to_the_next_burst(gcs, root):
+    (root / "f").write_bytes(b"p" * 2_000_000)
+    opened(gcs, b"f")
+    gcs.request(Op.BURST_READ_FILE, size=100)
+    now = 0.0
+    for offset in range(0, 1_000_000, BURST_PACKETS * 100):
+        gcs.request(Op.BURST_READ_FILE, size=100, offset=offset, now=now)
+        assert len(gcs.pump(now)) == BURST_PACKETS + 1  # the last one twice
+        now += 1.0
+    gcs.request(Op.BURST_READ_FILE, size=100, offset=1_000_000, now=now)
+    assert intervals(gcs, 3, now)[-1] == pytest.approx(1 / MAX_PPS)
+
+
 def test_burst_without_an_open_file_is_file_not_found(gcs):
     assert nak_code(gcs.one(Op.BURST_READ_FILE, size=80)) == Nak.FILE_NOT_FOUND
 
@@ -414,7 +501,7 @@ def test_a_repeated_burst_request_is_ignored_while_it_runs_and_runs_again_when_d
     first = gcs.pump(max_packets=3)
     assert gcs.resend() == []
     rest = gcs.pump()
-    assert [p.offset for p in first + rest][:-1] == list(range(0, 1000, 100))
+    assert [p.offset for p in distinct(first + rest)][:-1] == list(range(0, 1000, 100))
     assert gcs.resend() == []
     assert [p.offset for p in gcs.pump()][:2] == [0, 100]
 
@@ -425,7 +512,7 @@ def test_a_new_burst_request_replaces_the_running_one(gcs, root):
     gcs.request(Op.BURST_READ_FILE, size=100)
     gcs.pump(max_packets=2)
     gcs.request(Op.BURST_READ_FILE, size=100, offset=800)
-    assert [p.offset for p in gcs.pump()] == [800, 900, 1000]
+    assert [p.offset for p in distinct(gcs.pump())] == [800, 900, 1000]
 
 
 def test_read_file_works_alongside_a_running_burst(gcs, root):

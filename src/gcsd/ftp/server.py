@@ -1,9 +1,9 @@
 """The MAVLink FTP server core: requests in, reply payloads out, time passed in as `now`.
 
 `handle(raw, sender, channel, now)` takes one FILE_TRANSFER_PROTOCOL payload and returns the
-replies to send now; `pump(channel, now, max_packets)` returns the packets of running bursts
-and finished CRC computations (at most `max_packets`, so the adapter paces them by the link's
-byte budget); `next_deadline(now)` says when either is next needed. No sockets, no clock, no
+replies to send now; `pump(channel, now, max_packets)` returns the burst packets due by `now`
+and finished CRC computations (at most `max_packets`, so the adapter can also hold them to the
+link's byte budget); `next_deadline(now)` says when either is next needed. No sockets, no clock, no
 asyncio here; file access goes through the injected ConfinedFs and VirtualFiles, whose every
 call is bounded (see fs.py).
 
@@ -37,9 +37,12 @@ length to `offset`. Rename "old\\0new". CalcFileCRC32 -> ACK with ArduPilot's CR
 no final XOR), computed CRC_SLICE_BYTES per pump for big files. ListDirectory -> entries
 "F<name>\\t<size>\\0" and "D<name>\\0" from index `offset`, sorted by name, "/" also lists the
 virtual directories; no entries -> EOF. BurstReadFile -> packets of the requested block size
-(239 when 0) from `offset`, at most BURST_PACKETS (500), burst_complete on a short packet or
-the 500th; a short packet, or reading exactly to the end, is followed by NAK EOF with the end
-offset. Unknown opcodes -> UnknownCommand.
+(239 when 0) from `offset`, paced, burst_complete on the last; NAK EOF after the end. Unknown
+opcodes -> UnknownCommand.
+
+Bursts (their length, pace and the repeated burst_complete packet) are in burst.py. A read
+in a session whose burst has already passed that offset is a gap request: a loss signal that
+slows the session's bursts down.
 """
 
 from __future__ import annotations
@@ -48,6 +51,7 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Callable
 
+from .burst import Burst, Pace
 from .fs import ConfinedFs, DirEntry
 from .protocol import DATA_MAX, FtpError, Nak, Op, Payload, crc32_ardupilot, path_arg, two_path_args
 from .virtual import Handle, VirtualFiles, split_virtual
@@ -56,7 +60,6 @@ MAX_SESSIONS = 5
 SESSION_IDLE_S = 30.0
 SESSION_REUSE_S = 3.0
 OPEN_FILE_STALE_S = 3.0
-BURST_PACKETS = 500
 CRC_SLICE_BYTES = 1 << 20
 CRC_READ_BYTES = 64 * 1024
 CLOSED_REPLIES_KEPT = 16
@@ -69,15 +72,6 @@ class Outgoing:
     channel: int
     target: tuple[int, int]  # (sysid, compid) of the requester
     payload: bytes
-
-
-@dataclass(slots=True)
-class _Burst:
-    request: Payload
-    raw: bytes
-    offset: int
-    block: int
-    sent: int = 0
 
 
 @dataclass(slots=True)
@@ -97,8 +91,9 @@ class _Session:
     handle_s: float = 0.0  # when the open file was last used
     last_request: bytes | None = None
     last_replies: list[bytes] | None = None
-    burst: _Burst | None = None
+    burst: Burst | None = None
     crc: _Crc | None = None
+    pace: Pace = field(default_factory=Pace)
 
     @property
     def busy(self) -> bool:
@@ -161,6 +156,9 @@ class FtpServer:
             if running is not None and running.raw == raw:
                 return []
         session.last_request, session.last_replies = raw, None
+        if session.burst is not None and req.opcode in (Op.READ_FILE, Op.BURST_READ_FILE) \
+                and req.offset < session.burst.offset:
+            session.pace.loss()  # the client asks again for what the burst has sent: it lost some
         op = self._ops.get(req.opcode)
         try:
             if req.size > DATA_MAX:
@@ -335,7 +333,7 @@ class FtpServer:
 
     def _burst_read(self, s: _Session, req: Payload, now: float) -> list[Payload]:
         self._reading(s, now)
-        s.burst = _Burst(req, req.pack(), req.offset, min(req.size, DATA_MAX) or DATA_MAX)
+        s.burst = Burst.start(req, now)
         return []
 
     # --- bursts and slow work --------------------------------------------------------------
@@ -352,42 +350,25 @@ class FtpServer:
                 if replies and s.last_request == job.raw:
                     s.last_replies = replies
                 out += [Outgoing(channel, target, p) for p in replies]
-            while s.burst is not None and len(out) < max_packets:
-                out.append(Outgoing(channel, target, self._burst_packet(s).pack()))
+            burst = s.burst
+            while burst is not None and len(out) < max_packets and burst.due(now):
+                out.append(Outgoing(channel, target, burst.next_packet(s.handle, s.pace, now).pack()))
+                if burst.done:
+                    s.burst = burst = None
             if s.burst is not None or s.crc is not None:
                 s.last_s = s.handle_s = now
         return out
 
-    def _burst_packet(self, s: _Session) -> Payload:
-        b = s.burst
-        step = 1 + b.sent
-        try:
-            data = s.handle.read(b.offset, b.block) if s.handle is not None else b""
-        except FtpError as exc:
-            s.burst = None
-            return b.request.nak(exc.code, exc.errno_value, offset=b.offset, burst_complete=1, seq_step=step)
-        if not data:
-            s.burst = None
-            return b.request.nak(Nak.EOF, offset=b.offset, burst_complete=1, seq_step=step)
-        b.sent += 1
-        short = len(data) < b.block
-        packet = b.request.ack(data, offset=b.offset, burst_complete=int(short or b.sent >= BURST_PACKETS),
-                               seq_step=step)
-        b.offset += len(data)
-        if b.sent >= BURST_PACKETS and not short:
-            s.burst = None
-        return packet
-
     def has_work(self, channel: int) -> bool:
         return any(s.key[2] == channel and (s.burst or s.crc) for s in self._sessions.values())
 
-    def next_deadline(self, now: float) -> float | None:
-        """now while a burst or CRC runs; else when the next idle session expires."""
-        if any(s.burst or s.crc for s in self._sessions.values()):
-            return now
-        if not self._sessions:
-            return None
-        return min(s.last_s for s in self._sessions.values()) + SESSION_IDLE_S
+    def next_deadline(self, now: float, channel: int | None = None) -> float | None:
+        """now while a CRC runs, a burst's next packet time, else the next idle expiry (of the
+        sessions on `channel`, or of all)."""
+        sessions = [s for s in self._sessions.values() if channel is None or s.key[2] == channel]
+        times = [now if s.crc else s.burst.next_s for s in sessions if s.crc or s.burst]
+        times += [s.last_s + SESSION_IDLE_S for s in sessions]
+        return min(times) if times else None
 
 
 def _dir_entry(e: DirEntry) -> bytes:

@@ -4,10 +4,11 @@
   the requesting link, targeted at the requester (target_network 0), while the link's byte
   budget has room; what does not fit waits in a per-link outbox of OUTBOX_MAX replies (older
   ones are dropped and counted beyond that: the client retries).
-- Bursts and long CRCs go out in the node's send pass (`pending`): at most PACKETS_PER_PASS
-  per pass (then the pass yields to the event loop), and on a link with a configured bandwidth
-  no more than a third of it, as ArduPilot paces bursts (3 x packet bytes / bandwidth between
-  packets), so a radio link keeps room for telemetry and for the client's requests.
+- Bursts and long CRCs go out in the node's send pass (`pending`) when the server says they
+  are due (it paces bursts itself, see ftp/burst.py): at most PACKETS_PER_PASS per pass (then
+  the pass yields to the event loop), and on a link with a configured bandwidth no more than a
+  third of it, as ArduPilot paces bursts (3 x packet bytes / bandwidth between packets), so a
+  radio link keeps room for telemetry and for the client's requests.
 - Any FTP reply slows the link's streams x4 for SLOW_S (1 s), as ArduPilot does.
 - The FTP root is `ftp.root` under the vehicle's state directory; writes stop at
   `ftp.max_file_bytes`. Virtual files: `@PARAM/param.pck` through the node's parameter store
@@ -91,21 +92,20 @@ class FtpService(Service):
         """The send-pass hook: outbox, then bursts and CRCs; returns this service's next deadline."""
         index = channel.index
         self.server.expire(now)
-        deadline = None
+        gate = None  # when the link can take FTP packets again, if it cannot now
         if not self._flush(channel, now, send):
-            deadline = now + max(channel.budget_wait_s(MAX_FRAME_BYTES), 0.001)
+            gate = now + max(channel.budget_wait_s(MAX_FRAME_BYTES), 0.001)
         elif self.server.has_work(index):
-            deadline = self._pump(channel, now, send)
+            gate = self._pump(channel, now, send)
+        deadline = self.server.next_deadline(now, index)
+        if gate is not None:
+            deadline = gate if deadline is None else max(deadline, gate)
         until = self._slow_until_s.get(index)
-        if until is not None:
-            if now >= until:
-                del self._slow_until_s[index]
-                self.node.link(channel).set_slow("ftp", False)
-            else:
-                deadline = until if deadline is None else min(deadline, until)
-        expiry = self.server.next_deadline(now)
-        if expiry is not None and expiry > now:
-            deadline = expiry if deadline is None else min(deadline, expiry)
+        if until is not None and now >= until:
+            del self._slow_until_s[index]
+            self.node.link(channel).set_slow("ftp", False)
+        elif until is not None:
+            deadline = until if deadline is None else min(deadline, until)
         return deadline
 
     # --- sending ---------------------------------------------------------------------------
@@ -118,7 +118,8 @@ class FtpService(Service):
             box.popleft()
         return True
 
-    def _pump(self, channel, now: float, send) -> float:
+    def _pump(self, channel, now: float, send) -> float | None:
+        """Burst packets that are due, within the pass limit and the link's budget."""
         index = channel.index
         bandwidth = channel.config.bandwidth
         sent = 0
@@ -127,14 +128,14 @@ class FtpService(Service):
                 return self._next_burst_s[index]
             if not channel.has_room(MAX_FRAME_BYTES):
                 return now + max(channel.budget_wait_s(MAX_FRAME_BYTES), 0.001)
-            packets = self.server.pump(index, now, 1)
+            packets = self.server.pump(index, now, 1 if bandwidth else PACKETS_PER_PASS - sent)
             if not packets:
-                return now if self.server.has_work(index) else None
-            if not self._send(channel, packets[0], now, send):
-                box = self._outbox.setdefault(index, deque())
-                box.append(packets[0])  # keep it: a burst packet is not re-requested unless lost
-                return now + 0.001
-            sent += 1
+                return None  # nothing due now: the server's deadline says when
+            for i, packet in enumerate(packets):
+                if not self._send(channel, packet, now, send):
+                    self._outbox.setdefault(index, deque()).extend(packets[i:])  # not lost: sent next pass
+                    return now + 0.001
+            sent += len(packets)
             if bandwidth:
                 start = max(self._next_burst_s.get(index, 0.0), now)
                 gap_s = BURST_BANDWIDTH_SHARE * len(packets[0].payload) / bandwidth
