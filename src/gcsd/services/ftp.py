@@ -12,7 +12,7 @@
 - Any FTP reply slows the link's streams x4 for SLOW_S (1 s), as ArduPilot does.
 - The FTP root is `ftp.root` under the vehicle's state directory; writes stop at
   `ftp.max_file_bytes`. Virtual files: `@PARAM/param.pck` through the node's parameter store
-  and parameter service.
+  and parameter service, `@MISSION/*.dat` through its mission service.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..channel import MAX_FRAME_BYTES
 from ..ftp.fs import ConfinedFs
+from ..ftp.mission_files import MissionFiles
 from ..ftp.server import FtpServer, Outgoing
 from ..ftp.virtual import VirtualFiles
 from . import Incoming, Service
@@ -65,9 +66,11 @@ class NodeParams:
 class FtpService(Service):
     capabilities = M.MAV_PROTOCOL_CAPABILITY_FTP
 
-    def __init__(self, node, root: Path, max_file_bytes: int, missions=None) -> None:
+    def __init__(self, node, root: Path, max_file_bytes: int) -> None:
         self.node = node
         params = NodeParams(node) if getattr(node, "params", None) is not None else None
+        plans = getattr(node, "mission", None)  # the mission service: read_plan / write_plan
+        missions = MissionFiles(plans) if hasattr(plans, "read_plan") else None
         self.server = FtpServer(ConfinedFs(root, max_file_bytes), VirtualFiles(params, missions))
         self._outbox: dict[int, deque[Outgoing]] = {}
         self._slow_until_s: dict[int, float] = {}
