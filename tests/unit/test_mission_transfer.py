@@ -498,11 +498,15 @@ def test_pipelined_out_of_order_requests_are_each_answered(kind):
     plan = kind.plan(6)
     upload(mt, plan)
     answered = {}
+    copies = []
     for seq in (4, 0, 2, 1, 3, 2, 5):  # MAVProxy asks 5 ahead and re-asks the missing ones
-        [m] = sent(mt.mission_request(OTHER, seq, False, 1.0), "MISSION_ITEM_INT")
+        replies = sent(mt.mission_request(OTHER, seq, False, 1.0), "MISSION_ITEM_INT")
+        copies.append(len(replies))
+        m = replies[0]
         assert (m.target_system, m.target_component, m.mission_type) == (*OTHER.node, kind.mission_type)
         answered[m.seq] = MissionItem(m.command, m.frame, m.current, m.autocontinue, m.param1, m.param2,
                                       m.param3, m.param4, m.x, m.y, m.z)
+    assert copies == [1, 1, 1, 1, 1, 2, 1]  # 2 was asked again: its reply was lost
     assert [answered[s] for s in range(6)] == kind.served(plan)
 
 
@@ -718,3 +722,26 @@ def test_a_whole_fence_invalid_as_a_whole_is_an_error_with_the_reason():
     mt = machine(FENCE)
     result, out = mt.write_plan([replace(FENCE.item(0), param1=0.0)], 0.0)
     assert result == M.MAV_MISSION_ERROR and texts(out) == ["Fence: circle at item 0 needs a radius > 0"]
+
+
+def test_an_item_asked_for_again_is_sent_twice_because_a_reply_was_lost(kind):
+    mt = machine(kind)
+    upload(mt, kind.plan(3))
+    mt.mission_request_list(GCS, 1.0)
+    assert len(sent(mt.mission_request(GCS, 1, False, 1.0), "MISSION_ITEM_INT")) == 1
+    assert len(sent(mt.mission_request(GCS, 2, False, 1.1), "MISSION_ITEM_INT")) == 1
+    again = sent(mt.mission_request(GCS, 1, False, 1.6), "MISSION_ITEM_INT")
+    assert [m.seq for m in again] == [1, 1]
+    assert len(sent(mt.mission_request(OTHER, 1, False, 1.7), "MISSION_ITEM_INT")) == 1  # per requester
+    assert len(sent(mt.mission_request(GCS, 1, True, 1.8), "MISSION_ITEM")) == 2
+    mt.mission_request_list(GCS, 2.0)  # a new download starts afresh
+    assert len(sent(mt.mission_request(GCS, 1, False, 2.1), "MISSION_ITEM_INT")) == 1
+
+
+def test_download_bookkeeping_is_bounded_to_8_ground_stations(kind):
+    mt = machine(kind)
+    upload(mt, kind.plan(2))
+    mt.mission_request(GCS, 0, False, 1.0)
+    for sysid in range(1, 9):  # eight others push GCS out
+        mt.mission_request(Origin(sysid, 1, "other"), 0, False, 1.0)
+    assert len(sent(mt.mission_request(GCS, 0, False, 1.1), "MISSION_ITEM_INT")) == 1

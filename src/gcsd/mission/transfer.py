@@ -31,8 +31,11 @@ the same node, which gets that upload's ACK again* (its first ACK was lost).
 Downloads keep no state, as in ArduPilot: REQUEST_LIST -> MISSION_COUNT (DENIED while
 receiving); REQUEST_INT -> MISSION_ITEM_INT (DENIED while receiving; out of range ->
 MISSION_COUNT then INVALID_SEQUENCE); legacy REQUEST -> MISSION_ITEM with a once-per-list
-warning. Requests may be pipelined and out of order; each is answered on its own. The GCS's
-final MISSION_ACK of a download needs no answer.
+warning. Requests may be pipelined and out of order; each is answered on its own. An item the
+same ground station asks for again since its REQUEST_LIST is sent twice* (the request proves a
+reply was lost: MAVSDK abandons a whole download after 5 tries of one item, so on a lossy link
+the second copy is what lets it finish; clients ignore the duplicate). The GCS's final
+MISSION_ACK of a download needs no answer. This bookkeeping is kept for 8 ground stations.
 """
 
 from __future__ import annotations
@@ -48,6 +51,8 @@ from .stores import PlanStore
 RETRY_S = 1.0
 ABORT_S = 8.0
 ACCEPTED, ERROR, DENIED = M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_ERROR, M.MAV_MISSION_DENIED
+REPEAT_COPIES = 2  # an item asked for again is sent twice
+MAX_REQUESTERS = 8  # download bookkeeping is kept for this many ground stations
 LEGACY_ITEM_TEXT = "got MISSION_ITEM; GCS should send MISSION_ITEM_INT"
 LEGACY_REQUEST_TEXT = "got MISSION_REQUEST; use MISSION_REQUEST_INT!"
 
@@ -121,6 +126,7 @@ class MissionTransfer:
         self._upload: _Upload | None = None
         self._finished: _Finished | None = None
         self._download_warned: set[tuple[int, int]] = set()
+        self._answered: dict[tuple[int, int], set[int]] = {}  # per requester, since its REQUEST_LIST
 
     # --- what the adapter may ask ------------------------------------------------------------
     @property
@@ -210,6 +216,7 @@ class MissionTransfer:
         if self._upload is not None:
             return [self._ack(origin, DENIED)]
         self._download_warned.discard(origin.node)
+        self._answered.pop(origin.node, None)
         return [self._count(origin)]
 
     def mission_request(self, origin: Origin, seq: int, legacy: bool, now: float) -> list[Output]:
@@ -219,14 +226,30 @@ class MissionTransfer:
         if item is None:
             return [self._count(origin), self._ack(origin, M.MAV_MISSION_INVALID_SEQUENCE)]
         target = origin.node
+        copies = REPEAT_COPIES if self._asked_before(origin.node, seq) else 1
         if not legacy:
-            return [Send(origin.channel, item_int_message(item, seq, self.mission_type, target))]
+            return [Send(origin.channel, item_int_message(item, seq, self.mission_type, target))] * copies
         out: list[Output] = []
         if origin.node not in self._download_warned:
+            if len(self._download_warned) >= MAX_REQUESTERS:
+                self._download_warned.clear()
             self._download_warned.add(origin.node)
             out.append(Text(M.MAV_SEVERITY_WARNING, LEGACY_REQUEST_TEXT, origin.channel))
-        out.append(Send(origin.channel, item_float_message(item, seq, self.mission_type, target)))
+        out += [Send(origin.channel, item_float_message(item, seq, self.mission_type, target))] * copies
         return out
+
+    def _asked_before(self, node: tuple[int, int], seq: int) -> bool:
+        """Whether this requester already asked for seq in this download (then it lost a reply)."""
+        answered = self._answered.pop(node, None)
+        if answered is None:
+            answered = set()
+            if len(self._answered) >= MAX_REQUESTERS:
+                del self._answered[next(iter(self._answered))]
+        self._answered[node] = answered  # most recent last
+        if seq in answered:
+            return True
+        answered.add(seq)
+        return False
 
     # --- clear -------------------------------------------------------------------------------
     def denies(self, origin: Origin) -> bool:
