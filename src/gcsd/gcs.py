@@ -203,6 +203,10 @@ class GCS:
             tasks.append(tg.create_task(self._log_stats(), name="stats"))
             tasks.append(tg.create_task(self._save_signing_timestamp(), name="signing"))
             await stop.wait()
+            now = self.clock.now()
+            for node in self.nodes:
+                node.shutdown(now)  # final answers go out while the links are still open
+            await asyncio.sleep(0.05)  # let stream transports write them
             for task in tasks:
                 task.cancel()
         for node in self.nodes:

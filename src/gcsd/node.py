@@ -128,6 +128,17 @@ class VehicleNode:
     def wake(self, channel: Channel) -> None:
         self._wake(channel)
 
+    def shutdown(self, now: float) -> None:
+        """A clean stop is coming while the links are still open: services that can end what they
+        are doing with a proper answer (an upload with OPERATION_CANCELLED) do it now."""
+        for service in self.services:
+            end = getattr(service, "shutdown", None)
+            if end is not None:
+                try:
+                    end(now)
+                except Exception:
+                    log.exception("shutdown_failed", service=type(service).__name__)
+
     def close(self) -> None:
         """Flush state at a clean stop."""
         try:
