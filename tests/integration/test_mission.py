@@ -194,7 +194,9 @@ def test_legacy_mission_item_and_mission_request_work_with_warnings(gcs):
 
 
 def test_mission_current_follows_the_plan_and_set_current(gcs):
-    _, c = gcs
+    d, c = gcs
+    changes = []
+    d.gcs.nodes[0].mission.current_changed = lambda seq, reset_jumps: changes.append((seq, reset_jumps))
     assert MissionClient(c).upload(MISSION_PLAN, 0) == ACCEPTED
     mark = c.mark()
     current = wait_for(c, is_type("MISSION_CURRENT", VEHICLE), timeout=3.0, since=mark)
@@ -216,6 +218,11 @@ def test_mission_current_follows_the_plan_and_set_current(gcs):
     ack = wait_for(c, is_ack(M.MAV_CMD_DO_SET_MISSION_CURRENT), since=mark)
     assert ack is not None and ack.msg.result == M.MAV_RESULT_ACCEPTED
     assert wait_for(c, lambda r: r.type == "MISSION_CURRENT" and r.msg.seq == 2, timeout=0.4, since=mark)
+    mark = c.mark()
+    c.command_long(M.MAV_CMD_DO_SET_MISSION_CURRENT, 1, 1)  # param2 = 1: reset jump counters, resume
+    ack = wait_for(c, is_ack(M.MAV_CMD_DO_SET_MISSION_CURRENT), since=mark)
+    assert ack is not None and ack.msg.result == M.MAV_RESULT_ACCEPTED
+    assert changes == [(3, False), (2, False), (1, True)]  # what the vehicle's hook was told
 
 
 def test_mission_current_says_no_mission_with_home_alone(gcs):

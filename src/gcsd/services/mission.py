@@ -19,7 +19,8 @@ reason) and renamed to `<name>.waypoints.invalid`, never silently overwritten; t
 empty.
 
 Also: MISSION_SET_CURRENT (pushes MISSION_CURRENT with the new seq; nothing on failure),
-MAV_CMD_DO_SET_MISSION_CURRENT (DENIED out of range), MISSION_CURRENT's content
+MAV_CMD_DO_SET_MISSION_CURRENT (DENIED out of range; param2 = 1 is passed on to the vehicle's
+`current_changed(seq, reset_jumps)` hook), MISSION_CURRENT's content
 (`current_message`), the `item_reached(seq)` hook the simulation calls (MISSION_ITEM_REACHED to
 every ground station), and mission items with current = 2 / 3 (guided "fly to" / change
 altitude), which are not uploads: they go to `guided_handler` (ERROR until a simulation sets one).
@@ -78,6 +79,8 @@ class MissionService(Service):
             for s in stores
         }
         self.guided_handler: Callable[[MissionItem, int], bool] | None = None
+        # the vehicle's hook for a new current item: (seq, reset jump counters and resume)
+        self.current_changed: Callable[[int, bool], None] | None = None
         self.reached_seq: int | None = None
         self.complete = False
         self._slowed: set[int] = set()  # channel indices whose streams we slowed
@@ -155,21 +158,23 @@ class MissionService(Service):
 
     # --- current item ------------------------------------------------------------------------
     def handle_MISSION_SET_CURRENT(self, inc: Incoming) -> None:
-        if self._set_current(inc.msg.seq):
+        if self._set_current(inc.msg.seq, False):
             self.node.link(inc.channel).push(M.MAVLINK_MSG_ID_MISSION_CURRENT)
 
     def do_set_mission_current(self, req: CommandRequest) -> int:
         if not math.isfinite(req.param1) or not 0 <= req.param1 < self.mission.count():
             return M.MAV_RESULT_DENIED
-        if not self._set_current(int(req.param1)):
+        if not self._set_current(int(req.param1), req.param2 == 1):
             return M.MAV_RESULT_FAILED
         self._push_current()
         return M.MAV_RESULT_ACCEPTED
 
-    def _set_current(self, seq: int) -> bool:
+    def _set_current(self, seq: int, reset_jumps: bool) -> bool:
         if not self.mission.set_current(seq):
             return False
         self.complete = False
+        if self.current_changed is not None:
+            self.current_changed(seq, reset_jumps)
         return True
 
     def current_message(self):
