@@ -4,15 +4,24 @@ the NAK codes, sessions, retries, the idle timeout and burst reads, with a float
 from __future__ import annotations
 
 import errno
+import itertools
 import os
 import zlib
 
 import pytest
 from ftp_helpers import Gcs, errno_of, is_ack, make_server, nak_code
 
+from gcsd.ftp.burst import (
+    ADD_PPS,
+    BURST_PACKETS,
+    HOLD_PACKETS,
+    MAX_PPS,
+    MIN_PPS,
+    PROBE_PACKETS,
+    SLACK_S,
+    START_PPS,
+)
 from gcsd.ftp.protocol import DATA_MAX, Nak, Op, Payload, crc32_ardupilot
-from gcsd.ftp.burst import (ADD_PPS, BURST_PACKETS, HOLD_PACKETS, MAX_PPS, MIN_PPS, PROBE_PACKETS, SLACK_S,
-                            START_PPS)
 from gcsd.ftp.server import MAX_SESSIONS, SESSION_IDLE_S
 
 
@@ -432,7 +441,7 @@ def intervals(gcs: Gcs, count: int, now: float = 0.0) -> list[float]:
         assert len(gcs.server.pump(0, now, 1)) == 1
         times.append(now)
         now = gcs.server.next_deadline(now, 0)
-    return [b - a for a, b in zip(times, times[1:])]
+    return [b - a for a, b in itertools.pairwise(times)]
 
 
 def test_burst_packets_are_paced_from_the_start_rate(gcs, root):

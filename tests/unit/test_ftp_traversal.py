@@ -29,7 +29,7 @@ import pytest
 from ftp_helpers import Gcs, is_ack, make_server, nak_code
 
 from gcsd.ftp.fs import ConfinedFs
-from gcsd.ftp.protocol import Nak, Op
+from gcsd.ftp.protocol import FtpError, Nak, Op
 
 SECRET = b"TOP-SECRET-OUTSIDE-CONTENT"
 MARKER = "OUTSIDE_NAME_MARKER"
@@ -149,7 +149,7 @@ def test_every_path_opcode_refuses_every_hostile_path_and_touches_nothing_outsid
 
 
 def test_listing_the_root_leaves_out_links_that_lead_outside(layout):
-    tmp, root = layout
+    _tmp, root = layout
     gcs = Gcs(make_server(root))
     entries, offset = [], 0
     while True:
@@ -163,7 +163,7 @@ def test_listing_the_root_leaves_out_links_that_lead_outside(layout):
 
 
 def test_links_that_stay_inside_work(layout):
-    tmp, root = layout
+    _tmp, root = layout
     gcs = Gcs(make_server(root))
     assert is_ack(gcs.one(Op.OPEN_FILE_RO, b"link_in"))
     assert gcs.one(Op.READ_FILE, size=10).data[:4] == b"deep"
@@ -174,13 +174,13 @@ def test_links_that_stay_inside_work(layout):
 
 
 def test_dot_dot_is_refused_even_when_it_would_stay_inside(layout):
-    tmp, root = layout
+    _tmp, root = layout
     gcs = Gcs(make_server(root))
     assert nak_code(gcs.one(Op.OPEN_FILE_RO, b"sub/../inside.txt")) == Nak.FILE_NOT_FOUND
 
 
 def test_a_path_with_a_nul_inside_its_size_is_invalid_data_size(layout):
-    tmp, root = layout
+    _tmp, root = layout
     gcs = Gcs(make_server(root))
     assert nak_code(gcs.one(Op.OPEN_FILE_RO, b"inside.txt\0../secret.txt")) == Nak.INVALID_DATA_SIZE
 
@@ -199,6 +199,7 @@ def test_confinement_compares_path_components_not_string_prefixes(layout):
     fs = ConfinedFs(root, 1000)
     assert fs.resolve(b"inside.txt") == root.resolve() / "inside.txt"
     for path in (b"link_out_file", b"../data2", b"../data-evil/secret.txt"):
-        with pytest.raises(Exception):
+        with pytest.raises(FtpError) as refused:
             fs.resolve(path)
+        assert refused.value.code == Nak.FILE_NOT_FOUND
     assert str(tmp.resolve() / "data2").startswith(str(fs.root))  # the trap a string prefix falls into

@@ -77,7 +77,7 @@ class Burst:
     finished: bool = False  # ends once `repeat` is out
 
     @classmethod
-    def start(cls, request: Payload, now: float) -> "Burst":
+    def start(cls, request: Payload, now: float) -> Burst:
         block = min(request.size, DATA_MAX) or DATA_MAX
         return cls(request, request.pack(), request.offset, block, now)
 

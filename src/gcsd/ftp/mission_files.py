@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import errno
 import struct
-from typing import Callable, Protocol
+from collections.abc import Callable
+from typing import Protocol
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 

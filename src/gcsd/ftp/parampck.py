@@ -29,8 +29,9 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable, Protocol
+from typing import Protocol
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
@@ -75,11 +76,11 @@ def parse_query(query: str) -> PckQuery | None:
     return PckQuery(values["start"], values["count"], values["withdefaults"] == 1)
 
 
-def _c_float(value: float | int) -> float:
+def _c_float(value: float) -> float:
     return struct.unpack("<f", struct.pack("<f", float(value)))[0]
 
 
-def _pack_value(code: int, value: float | int) -> bytes:
+def _pack_value(code: int, value: float) -> bytes:
     if code == 4:
         return CODE_FORMAT[4].pack(float(value))
     fmt = CODE_FORMAT[code]

@@ -76,7 +76,7 @@ class Payload:
                 f"bc={self.burst_complete}, offset={self.offset}, data={self.data[:self.size]!r})")
 
     @classmethod
-    def unpack(cls, raw: bytes | bytearray | list[int]) -> "Payload":
+    def unpack(cls, raw: bytes | bytearray | list[int]) -> Payload:
         raw = bytes(raw)
         if len(raw) < PAYLOAD_BYTES:
             raw = raw + bytes(PAYLOAD_BYTES - len(raw))
@@ -93,7 +93,7 @@ class Payload:
         )
 
     def reply(self, opcode: int, size: int = 0, data: bytes = b"", offset: int | None = None,
-              burst_complete: int = 0, seq_step: int = 1) -> "Payload":
+              burst_complete: int = 0, seq_step: int = 1) -> Payload:
         """A reply to this request: seq + step (wrapping at 65536), same session, req_opcode set."""
         return replace(
             self, seq=(self.seq + seq_step) % SEQ_MODULO, opcode=opcode, size=size, req_opcode=self.opcode,
@@ -101,11 +101,11 @@ class Payload:
         )
 
     def ack(self, data: bytes = b"", offset: int | None = None, burst_complete: int = 0,
-            seq_step: int = 1) -> "Payload":
+            seq_step: int = 1) -> Payload:
         return self.reply(Op.ACK, len(data), data, offset, burst_complete, seq_step)
 
     def nak(self, code: int, errno_value: int = 0, offset: int | None = None, burst_complete: int = 0,
-            seq_step: int = 1) -> "Payload":
+            seq_step: int = 1) -> Payload:
         """A NAK; FailErrno carries the errno as a second byte (size 2), every other code size 1."""
         data = bytes([code, errno_value & 0xFF]) if code == Nak.FAIL_ERRNO else bytes([code])
         return self.reply(Op.NAK, len(data), data, offset, burst_complete, seq_step)

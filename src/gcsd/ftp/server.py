@@ -48,8 +48,8 @@ slows the session's bursts down.
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 from .burst import Burst, Pace
 from .fs import ConfinedFs, DirEntry

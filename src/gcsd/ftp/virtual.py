@@ -22,7 +22,8 @@ Handles share one small interface with fs.RealFile: `size`, `writable`, `read(of
 from __future__ import annotations
 
 import errno
-from typing import Callable, Iterable, Protocol
+from collections.abc import Callable, Iterable
+from typing import Protocol
 
 from .fs import DirEntry
 from .parampck import MAX_UPLOAD_BYTES, ParamLike, PckQuery, decode_upload, encode, parse_query
@@ -56,8 +57,7 @@ class ParamSource(Protocol):
 def split_virtual(raw: bytes) -> tuple[str, str] | None:
     """("@ROOT", "rest") for a virtual path, else None."""
     text = raw.decode("utf-8", "surrogateescape")
-    if text.startswith("/"):
-        text = text[1:]
+    text = text.removeprefix("/")
     if not text.startswith("@"):
         return None
     root, _, rest = text.partition("/")
@@ -136,7 +136,7 @@ class VirtualFiles:
         self._param_opens = 0
 
     def _param_query(self, rest: str) -> PckQuery:
-        name, sep, query = rest.partition("?")
+        name, _sep, query = rest.partition("?")
         if self.params is None or name != PARAM_FILE:
             raise FtpError(Nak.FILE_NOT_FOUND)
         parsed = parse_query(query)
