@@ -285,3 +285,20 @@ def test_500_item_mission_round_trips_through_20_percent_loss_each_way(daemon, c
         assert proxy.dropped["up"] > 50 and proxy.dropped["down"] > 50
     finally:
         proxy.close()
+
+
+def test_a_clean_stop_cancels_an_upload_in_progress_and_keeps_the_plan(daemon, client, tmp_path):
+    d = daemon(config())
+    c = client(udp_url(d.port("gcs")))
+    c.heartbeat()
+    assert MissionClient(c).upload(RALLY_PLAN, 2) == ACCEPTED
+    mark = c.mark()
+    c.send(M.MAVLink_mission_count_message(*VEHICLE, 5, 2))
+    assert wait_for(c, lambda r: r.type == "MISSION_REQUEST" and r.msg.seq == 0, since=mark)
+    d.stop()
+    ack = wait_for(c, is_type("MISSION_ACK", VEHICLE), timeout=1.0, since=mark)
+    assert ack is not None and ack.msg.type == M.MAV_MISSION_OPERATION_CANCELLED
+    again = daemon(config())
+    c2 = client(udp_url(again.port("gcs")))
+    c2.heartbeat()
+    assert MissionClient(c2).download(2) == RALLY_PLAN

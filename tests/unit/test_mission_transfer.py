@@ -745,3 +745,15 @@ def test_download_bookkeeping_is_bounded_to_8_ground_stations(kind):
     for sysid in range(1, 9):  # eight others push GCS out
         mt.mission_request(Origin(sysid, 1, "other"), 0, False, 1.0)
     assert len(sent(mt.mission_request(GCS, 0, False, 1.1), "MISSION_ITEM_INT")) == 1
+
+
+def test_a_stopping_vehicle_cancels_an_upload_in_progress_and_keeps_the_old_plan(kind):
+    mt = machine(kind)
+    old = kind.plan(2)
+    upload(mt, old)
+    assert mt.cancel(1.0) == []  # nothing in progress: nothing to say
+    mt.mission_count(GCS, 3, 2.0)
+    mt.mission_item(GCS, 0, kind.item(50), False, 2.1)
+    out = mt.cancel(2.2)
+    assert acks(out) == [M.MAV_MISSION_OPERATION_CANCELLED] and out[0].channel == GCS.channel
+    assert not mt.receiving and items_of(mt) == kind.served(old)

@@ -15,6 +15,7 @@ States and transitions (REFERENCE.md 7.1, with SPEC.md's improvements marked *):
     RECEIVING --8 s without a valid item--> IDLE, "<Type> upload timeout" + OPERATION_CANCELLED
     RECEIVING --MISSION_COUNT / CLEAR_ALL / MISSION_ACK from the owner--> the upload is dropped
               silently (a MISSION_ACK from the owner is how MAVSDK cancels*) and the new request runs
+    RECEIVING --cancel() (the daemon stops)--> IDLE, OPERATION_CANCELLED, old plan kept
 
 While RECEIVING: the next item is requested with MISSION_REQUEST (msg 40, as ArduPilot does)
 targeted at the owner on the channel the upload began on; no item for `retry_s` (1 s) plus the
@@ -296,6 +297,14 @@ class MissionTransfer:
             return ERROR, [self._save_failed(exc)]
         self._finished = None
         return ACCEPTED, [PlanChanged(self.mission_type, self.store.count())]
+
+    def cancel(self, now: float) -> list[Output]:
+        """The vehicle is stopping: an upload in progress ends with OPERATION_CANCELLED."""
+        up = self._upload
+        if up is None:
+            return []
+        self._upload = None
+        return [self._ack_owner(up, M.MAV_MISSION_OPERATION_CANCELLED)]
 
     # --- time --------------------------------------------------------------------------------
     def tick(self, now: float) -> list[Output]:

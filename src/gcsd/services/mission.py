@@ -222,6 +222,12 @@ class MissionService(Service):
         self._run(out)
         return result
 
+    def shutdown(self, now: float) -> None:
+        """A clean stop: uploads in progress are cancelled (their uploaders are told); plans were
+        saved when they were adopted, so there is nothing to flush."""
+        for t in self.transfers.values():
+            self._run(t.cancel(now))
+
     # --- timers ------------------------------------------------------------------------------
     def pending(self, channel, now: float, send) -> float | None:
         """Called from the node's send pass: run the transfer timers; return the next deadline.
