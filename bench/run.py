@@ -2,7 +2,7 @@
 
     python -m bench                      # everything (about 5 minutes on an idle machine)
     python -m bench --quick              # smoke run (about 1 minute)
-    python -m bench throughput latency   # just these; also: harness, vehicle, params, mission, signing
+    python -m bench throughput latency   # just these; also: harness, vehicle, params, mission, signing, ftp
     python -m bench --routers mavproxy   # only one router (gcsd, mavproxy, or both: gcsd,mavproxy)
 
 Progress goes to stderr; the result table to stdout; ``--json FILE`` saves every figure and trial.
@@ -27,6 +27,7 @@ from pathlib import Path as FsPath
 if __package__ in (None, ""):  # run as a script: python bench/run.py
     sys.path.insert(0, str(FsPath(__file__).resolve().parent.parent))
 
+from bench import ftp as bench_ftp  # noqa: E402
 from bench import measure  # noqa: E402
 from bench import mission as bench_mission  # noqa: E402
 from bench import signing as bench_signing  # noqa: E402
@@ -45,7 +46,7 @@ from bench.routers import (  # noqa: E402
     start_mavproxy,
 )
 
-WHAT = ("harness", "throughput", "latency", "vehicle", "params", "mission", "signing", "swarm")
+WHAT = ("harness", "throughput", "latency", "vehicle", "params", "mission", "signing", "swarm", "ftp")
 LATENCY_RATE = 1000
 
 
@@ -208,13 +209,13 @@ class Runner:
     # ----------------------------------------------------------------------------- measurements
     def run(self) -> None:
         a = self.a
-        if "gcsd" in a.routers or a.what & {"vehicle", "params", "mission", "signing"}:
+        if "gcsd" in a.routers or a.what & {"vehicle", "params", "mission", "signing", "ftp"}:
             ok, text = gcsd_available(self.gcsd_env)
             self.res["gcsd_version"] = text
             if not ok:
                 self.notes.append(f"gcsd not runnable ({text}); its columns are n/a")
                 a.routers = [r for r in a.routers if r != "gcsd"]
-                a.what -= {"vehicle", "params", "mission", "signing"}
+                a.what -= {"vehicle", "params", "mission", "signing", "ftp"}
                 log(f"gcsd not runnable: {text}")
         if a.what & {"harness", "throughput", "latency"}:
             self.harness()
@@ -231,6 +232,8 @@ class Runner:
             self.res["signing"] = bench_signing.measure_signing(self)
         if "swarm" in a.what:
             self.res["swarm"] = bench_swarm.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
+        if "ftp" in a.what:  # bench/ftp.py: 10 MB burst read and param.pck, against MAVSDK's ftp_server
+            self.res["ftp"] = bench_ftp.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
 
     def harness(self) -> None:
         a = self.a
@@ -419,6 +422,9 @@ class Runner:
             out += ["", bench_signing.table(self.res["signing"])]
         if self.res.get("swarm"):
             out += ["", bench_swarm.table(self.res["swarm"])]
+        if self.res.get("ftp"):
+            out += ["", "FTP: 10 MB burst read and @PARAM/param.pck, gcsd against MAVSDK's ftp_server (bench/ftp.py)",
+                    "", bench_ftp.table(self.res["ftp"])]
         return "\n".join(out)
 
 

@@ -213,6 +213,15 @@ def test_mavproxy_fetches_parameters_through_param_pck_with_defaults_equal_to_th
     for name, value in expected.items():
         assert got[name] == pytest.approx(value, rel=1e-6, abs=1e-6), name
 
+    # and back: `param ftpload` writes a param.pck, which sets the parameters when the session ends
+    wanted = {"SR0_EXTRA1": 3.0, "BATT_CAPACITY": 4321.0}
+    assert all(expected[name] != value for name, value in wanted.items())
+    upload = tmp_path / "changes.parm"
+    upload.write_text("".join(f"{name} {value:g}\n" for name, value in wanted.items()))
+    mp.run(f"param ftpload {upload}", r"Parameter upload done", "the param.pck upload")
+    wait_until(lambda: all(_list_download(daemon.port("gcs"))[n] == v for n, v in wanted.items()),
+               OP_WAIT_S, "the uploaded parameters did not take effect", daemon)
+
 
 def test_mavproxy_wp_ftp_and_fence_ftp_read_the_plans(spawn, gcsd_daemon, tmp_path):
     state = tmp_path / "gcsd" / "state"  # where gcsd_daemon() puts the daemon's state
