@@ -38,7 +38,8 @@ no final XOR), computed CRC_SLICE_BYTES per pump for big files. ListDirectory ->
 "F<name>\\t<size>\\0" and "D<name>\\0" from index `offset`, sorted by name, "/" also lists the
 virtual directories; no entries -> EOF. BurstReadFile -> packets of the requested block size
 (239 when 0) from `offset`, paced, burst_complete on the last; NAK EOF after the end. Unknown
-opcodes -> UnknownCommand.
+opcodes -> UnknownCommand, ListDirectoryWithTime (16, newer than ArduPilot) included: MAVProxy
+then lists without times.
 
 Bursts (their length, pace and the repeated burst_complete packet) are in burst.py. A read
 in a session whose burst has already passed that offset is a gap request: a loss signal that
