@@ -16,8 +16,9 @@ counts as a drop.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, fields
-from typing import Callable, Protocol
+from typing import Protocol
 
 from .codec import Encoder, Frame, FrameParser, MAVLink_message, ParseStats
 from .config import ChannelConfig
@@ -52,7 +53,7 @@ class PeerWriter(Protocol):
 class Peer:
     """One remote end on a channel: its parser, its writer and when it was last heard."""
 
-    __slots__ = ("key", "parser", "write", "last_rx_s")
+    __slots__ = ("key", "last_rx_s", "parser", "write")
 
     def __init__(self, key: object, write: PeerWriter, now: float, keep_bad_crc: bool = False) -> None:
         self.key = key

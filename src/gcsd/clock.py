@@ -4,7 +4,7 @@ is where the asyncio layer gets it, and what tests replace."""
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 
 class Clock:

@@ -46,7 +46,7 @@ MSG_ID_RADIO = mavlink.MAVLINK_MSG_ID_RADIO
 class _MessageInfo:
     """What routing needs of a message id: its CRC_EXTRA and where its target fields are."""
 
-    __slots__ = ("crc_extra", "target_system_ofs", "target_component_ofs")
+    __slots__ = ("crc_extra", "target_component_ofs", "target_system_ofs")
 
     def __init__(self, cls) -> None:
         self.crc_extra = cls.crc_extra
@@ -72,8 +72,18 @@ class Frame:
     is built the first time `msg` is read, i.e. only for frames something local will handle.
     """
 
-    __slots__ = ("raw", "msgid", "sysid", "compid", "seq", "version", "known",
-                 "target_system", "target_component", "_msg")
+    __slots__ = (
+        "_msg",
+        "compid",
+        "known",
+        "msgid",
+        "raw",
+        "seq",
+        "sysid",
+        "target_component",
+        "target_system",
+        "version",
+    )
 
     def __init__(self, raw: bytes, msgid: int, sysid: int, compid: int, seq: int, version: int,
                  known: bool, target_system: int = -1, target_component: int = -1) -> None:
@@ -103,7 +113,7 @@ class Frame:
         return mavlink.mavlink_map[self.msgid].msgname if self.known else f"UNKNOWN_{self.msgid}"
 
     @classmethod
-    def from_message(cls, msg: MAVLink_message) -> "Frame":
+    def from_message(cls, msg: MAVLink_message) -> Frame:
         """A Frame for a message we built or decoded ourselves (tests, loopback)."""
         frames = FrameParser().feed(bytes(msg.get_msgbuf()))
         return frames[0]

@@ -22,17 +22,17 @@ from pathlib import Path
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from . import __version__, control
 from .channel import Channel
 from .clock import Clock
 from .codec import Frame
 from .config import Config
 from .node import VehicleNode
 from .router import MSG_ID_HEARTBEAT, MSG_ID_RADIO, MSG_ID_RADIO_STATUS, Router
+from .services.ftp import FtpService
 from .services.signing import SigningService
-from . import __version__, control
 from .signing import SAVE_INTERVAL_S, SigningManager, SigningStore
 from .tlog import TlogWriter
-from .services.ftp import FtpService
 from .transport import run_channel
 from .vehicles import vehicle_type
 

@@ -11,7 +11,7 @@ place of the HEARTBEAT and no SRn_ streams; elsewhere HIGH_LATENCY2 is sent only
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 

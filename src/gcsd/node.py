@@ -12,12 +12,14 @@ keep running.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from .autopilot.attach import attach_services, initial_state
+from .autopilot.core import Autopilot
 from .channel import MAX_FRAME_BYTES, Channel
 from .clock import Clock
 from .codec import Frame
@@ -32,8 +34,6 @@ from .services.params import ParamService
 from .services.rates import RatesService
 from .services.statustext import StatusTextQueue
 from .services.timesync import TimesyncService
-from .autopilot.attach import attach_services, initial_state
-from .autopilot.core import Autopilot
 from .streams import PARAM_SUFFIX, STREAM_NAMES
 from .telemetry import PRODUCERS
 from .vehicles import VehicleType, prearm_failures, vehicle_params

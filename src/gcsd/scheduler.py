@@ -23,8 +23,8 @@ really used. `set_interval` implements the bucket assignment of `set_ap_message_
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 NUM_BUCKETS = 10
 MAX_INTERVAL_MS = 60_000

@@ -113,8 +113,7 @@ class Signing:
         elif ts <= last:
             return REPLAY
         self._streams[stream] = ts
-        if ts > self.timestamp:
-            self.timestamp = ts
+        self.timestamp = max(self.timestamp, ts)
         return None
 
 

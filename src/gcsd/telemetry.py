@@ -9,7 +9,8 @@ A message id without a producer cannot be streamed or requested (SET_MESSAGE_INT
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
@@ -271,6 +272,6 @@ PRODUCERS: dict[int, Producer] = {
     M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: extended_sys_state,
 }
 
-from .vehicle_telemetry import VEHICLE_PRODUCERS  # noqa: E402  (HIGH_LATENCY2, targets, fence)
+from .vehicle_telemetry import VEHICLE_PRODUCERS
 
 PRODUCERS.update(VEHICLE_PRODUCERS)

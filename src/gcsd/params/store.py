@@ -16,8 +16,8 @@ from __future__ import annotations
 import enum
 import math
 import struct
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from typing import Callable, Iterable, Iterator
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
@@ -68,7 +68,7 @@ def to_type(ptype: int, value: float) -> float | int:
     return int(max(lo, min(hi, nudged)))
 
 
-def as_float(value: float | int) -> float:
+def as_float(value: float) -> float:
     """The C cast a PARAM_VALUE carries."""
     return struct.unpack("<f", struct.pack("<f", float(value)))[0]
 

@@ -4,8 +4,9 @@ its dispatch tables from them, so no service is ever reached through an if-chain
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from ..channel import Channel
@@ -17,8 +18,8 @@ class Incoming:
     """A decoded message addressed to us, with where it came from and when."""
 
     msg: Any
-    frame: "Frame"
-    channel: "Channel"
+    frame: Frame
+    channel: Channel
     now: float
 
     @property

@@ -11,8 +11,8 @@ de-duplicated by `confirmation` (a resent command is executed again, as in ArduP
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M

@@ -5,7 +5,6 @@ tolerance inside which it lets the wind carry it), WP_RADIUS (m), FS_GCS_ENABLE,
 shared groups. Commands: NAV_TAKEOFF in VELOCITY or LOITER (armed, on the ground).
 """
 
-from .modes import mode_mapping
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import DISARM, Settings
@@ -15,6 +14,7 @@ from ..params.store import ParamDef as P
 from ..sim import BlimpDynamics, Limits
 from . import commands, common, prearm
 from .base import VehicleType, modes_named, stream_rates
+from .modes import mode_mapping
 
 _modes = mode_mapping("blimp")
 _by_name = {v: k for k, v in _modes.items()}

@@ -7,7 +7,6 @@ failsafe, RC override and SIM_ groups. Commands: NAV_TAKEOFF in GUIDED (armed, o
 DO_MOTOR_TEST (disarmed).
 """
 
-from .modes import mode_mapping
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import DISARM, Settings
@@ -17,6 +16,7 @@ from ..params.store import ParamDef as P
 from ..sim import Limits, MultirotorDynamics
 from . import commands, common, prearm
 from .base import VehicleType, modes_named, stream_rates
+from .modes import mode_mapping
 
 _modes = mode_mapping("acm")
 _by_name = {v: k for k, v in _modes.items()}

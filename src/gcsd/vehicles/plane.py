@@ -8,7 +8,6 @@ TAKEOFF mode with its altitude; DO_LAND_START jumps to the mission's landing seq
 mission ends in RTL, as ArduPlane's does.
 """
 
-from .modes import mode_mapping
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import DISARM, Settings
@@ -18,6 +17,7 @@ from ..params.store import ParamDef as P
 from ..sim import FixedWingDynamics, Limits
 from . import commands, common, prearm
 from .base import VehicleType, modes_named, stream_rates
+from .modes import mode_mapping
 
 _modes = mode_mapping("apm")
 _by_name = {v: k for k, v in _modes.items()}

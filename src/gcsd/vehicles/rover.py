@@ -6,7 +6,6 @@ MIS_DONE_BEHAVE (0 hold, 1 loiter, 2 acro, 3 manual), FS_GCS_ENABLE, FS_TIMEOUT,
 shared groups. Command: DO_SET_REVERSE (drive backwards).
 """
 
-from .modes import mode_mapping
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import DISARM, Settings
@@ -16,6 +15,7 @@ from ..params.store import ParamDef as P
 from ..sim import GroundDynamics, Limits
 from . import commands, common, prearm
 from .base import VehicleType, modes_named, stream_rates
+from .modes import mode_mapping
 
 _modes = mode_mapping("rover")
 _by_name = {v: k for k, v in _modes.items()}

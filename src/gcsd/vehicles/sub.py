@@ -6,7 +6,6 @@ battery failsafe, RC override and SIM_ groups (no rally: a sub has no RTL). Comm
 takeoff (UNSUPPORTED); LAND means surface.
 """
 
-from .modes import mode_mapping
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import DISARM, Settings
@@ -16,6 +15,7 @@ from ..params.store import ParamDef as P
 from ..sim import Limits, SubmarineDynamics
 from . import common, prearm
 from .base import VehicleType, modes_named, stream_rates
+from .modes import mode_mapping
 
 _modes = mode_mapping("sub")
 _by_name = {v: k for k, v in _modes.items()}

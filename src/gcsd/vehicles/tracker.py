@@ -7,7 +7,6 @@ holds; MANUAL follows the sticks. Parameters: YAW_SLEW_TIME, PITCH_SLEW_TIME (s 
 (MISSION_CURRENT is not sent), no fence, no takeoff.
 """
 
-from .modes import mode_mapping
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import Behaviour as B
@@ -17,6 +16,7 @@ from ..params.store import ParamDef as P
 from ..sim import Limits, TrackerDynamics
 from . import common, prearm
 from .base import VehicleType, modes_named, stream_rates
+from .modes import mode_mapping
 
 _modes = mode_mapping("tracker")
 _by_name = {v: k for k, v in _modes.items()}
