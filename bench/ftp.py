@@ -40,7 +40,6 @@ from __future__ import annotations
 import hashlib
 import os
 import select
-import signal
 import socket
 import statistics
 import struct
@@ -54,6 +53,7 @@ if __package__ in (None, ""):  # run as a script: python bench/ftp.py
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from bench import mavsdk_peer
 from bench.frames import walk_frames
 from bench.routers import Launched, _launch, free_udp_port, gcsd_config
 
@@ -81,24 +81,12 @@ def log(msg: str) -> None:
 
 def serve_mavsdk(port: int, root: str) -> int:
     """MAVSDK's ftp_server as an autopilot on udpin://127.0.0.1:port, until SIGTERM."""
-    from mavsdk.component_type import ComponentType
-    from mavsdk.mavsdk import Configuration, Mavsdk
     from mavsdk.plugins.ftp_server import FtpServer
 
-    stop = []
-    signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
-    mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.AUTOPILOT))
-    try:
-        mavsdk.add_any_connection(f"udpin://127.0.0.1:{port}")
+    with mavsdk_peer.node(f"udpin://127.0.0.1:{port}", autopilot=True) as mavsdk:
         server = FtpServer(mavsdk.server_component())
         server.set_root_dir(root)
-        print("ready", flush=True)
-        while not stop:
-            time.sleep(0.1)
-        server.destroy()
-    finally:
-        mavsdk.destroy()
-    return 0
+        return mavsdk_peer.serve_until_sigterm(server)
 
 
 def _wait_ready(server: Launched, marker: str | None, port: int, timeout_s: float = 20.0) -> None:

@@ -30,7 +30,6 @@ from __future__ import annotations
 import json
 import os
 import random
-import signal
 import statistics
 import subprocess
 import sys
@@ -41,6 +40,7 @@ from pathlib import Path
 if __package__ in (None, ""):  # run as a script: python bench/mission.py
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from bench import mavsdk_peer  # noqa: E402
 from bench.routers import Launched, _launch, free_udp_port, gcsd_config, udp_port_bound  # noqa: E402
 
 TOTAL = 1000
@@ -69,69 +69,45 @@ def plan_fields(total: int = TOTAL) -> list[tuple]:
 
 def serve_mavsdk(port: int) -> int:
     """MAVSDK's mission_raw_server as an autopilot on udpin://127.0.0.1:port, until SIGTERM."""
-    from mavsdk.component_type import ComponentType
-    from mavsdk.mavsdk import Configuration, Mavsdk
     from mavsdk.plugins.mission_raw_server import MissionRawServer
 
-    stop = []
-    signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
-    mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.AUTOPILOT))
     received = []
-    try:
-        mavsdk.add_any_connection(f"udpin://127.0.0.1:{port}")
+    with mavsdk_peer.node(f"udpin://127.0.0.1:{port}", autopilot=True) as mavsdk:
         server = MissionRawServer(mavsdk.server_component())
         handle = server.subscribe_incoming_mission(lambda result, plan, *_: received.append(result))
-        print("ready", flush=True)
-        while not stop:
-            time.sleep(0.1)
-        server.unsubscribe_incoming_mission(handle)
-        server.destroy()
-    finally:
-        mavsdk.destroy()
+        code = mavsdk_peer.serve_until_sigterm(server, lambda: server.unsubscribe_incoming_mission(handle))
     print(f"incoming missions: {len(received)}", flush=True)
-    return 0
+    return code
 
 
 def mavsdk_client(port: int, reps: int, total: int) -> int:
     """MAVSDK's mission_raw against the autopilot on port; prints one JSON line."""
-    from mavsdk.component_type import ComponentType
-    from mavsdk.mavsdk import Configuration, Mavsdk
     from mavsdk.plugins.mission_raw import MissionItem, MissionRaw
 
     fields = plan_fields(total)
     items = [MissionItem(*f) for f in fields]
-    mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
-    out: dict = {"upload_s": [], "download_s": [], "mismatches": []}
-    try:
-        mavsdk.add_any_connection(f"udpout://127.0.0.1:{port}")
-        system = mavsdk.first_autopilot(10.0)
-        if system is None:
-            out["error"] = "no autopilot within 10 s"
-        else:
-            mission = MissionRaw(system)
+
+    def body(system, out: dict) -> None:
+        mission = MissionRaw(system)
+        mission.upload_mission(items)
+        mission.download_mission()
+        pauses = random.Random(PAUSE_SEED)
+        for _ in range(reps):
+            time.sleep(pauses.uniform(*PAUSE_S))
+            t0 = time.perf_counter()
             mission.upload_mission(items)
-            mission.download_mission()
-            pauses = random.Random(PAUSE_SEED)
-            for _ in range(reps):
-                time.sleep(pauses.uniform(*PAUSE_S))
-                t0 = time.perf_counter()
-                mission.upload_mission(items)
-                t1 = time.perf_counter()
-                got = mission.download_mission()
-                t2 = time.perf_counter()
-                out["upload_s"].append(t1 - t0)
-                out["download_s"].append(t2 - t1)
-                back = [(g.seq, g.frame, g.command, g.current, g.autocontinue, g.param1, g.param2, g.param3,
-                         g.param4, g.x, g.y, g.z, g.mission_type) for g in got]
-                differing = int(len(back) != len(fields)) + sum(a != b for a, b in zip(back, fields))
-                out["mismatches"].append(differing)
-            mission.destroy()
-    except Exception as exc:  # reported in the table, not a crash of the whole bench
-        out["error"] = repr(exc)
-    finally:
-        mavsdk.destroy()
-    print("RESULT " + json.dumps(out), flush=True)
-    return 0
+            t1 = time.perf_counter()
+            got = mission.download_mission()
+            t2 = time.perf_counter()
+            out["upload_s"].append(t1 - t0)
+            out["download_s"].append(t2 - t1)
+            back = [(g.seq, g.frame, g.command, g.current, g.autocontinue, g.param1, g.param2, g.param3,
+                     g.param4, g.x, g.y, g.z, g.mission_type) for g in got]
+            differing = int(len(back) != len(fields)) + sum(a != b for a, b in zip(back, fields))
+            out["mismatches"].append(differing)
+        mission.destroy()
+
+    return mavsdk_peer.client_run(port, body, {"upload_s": [], "download_s": [], "mismatches": []})
 
 
 # ---------------------------------------------------------------------------------- measuring

@@ -45,7 +45,6 @@ import json
 import os
 import random
 import select
-import signal
 import socket
 import statistics
 import struct
@@ -60,6 +59,7 @@ if __package__ in (None, ""):  # run as a script: python bench/params.py
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
 
+from bench import mavsdk_peer  # noqa: E402
 from bench.frames import walk_frames  # noqa: E402
 from bench.peers import _big_buffers  # noqa: E402
 from bench.routers import (  # noqa: E402
@@ -133,15 +133,9 @@ def serve_gcsd(cfg: str, total: int) -> int:
 def serve_mavsdk(port: int, total: int) -> int:
     """MAVSDK's param_server as an autopilot on udpin://127.0.0.1:port, until SIGTERM."""
     from gcsd.params import REAL32
-    from mavsdk.component_type import ComponentType
-    from mavsdk.mavsdk import Configuration, Mavsdk
     from mavsdk.plugins.param_server import ParamServer
 
-    stop = []
-    signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
-    mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.AUTOPILOT))
-    try:
-        mavsdk.add_any_connection(f"udpin://127.0.0.1:{port}")
+    with mavsdk_peer.node(f"udpin://127.0.0.1:{port}", autopilot=True) as mavsdk:
         server = ParamServer(mavsdk.server_component())
         server.set_protocol(False)
         for d in bench_defs(total):
@@ -149,47 +143,28 @@ def serve_mavsdk(port: int, total: int) -> int:
                 server.provide_param_float(d.name, float(d.default))
             else:
                 server.provide_param_int(d.name, int(d.default))
-        print("ready", flush=True)
-        while not stop:
-            time.sleep(0.1)
-        server.destroy()
-    finally:
-        mavsdk.destroy()
-    return 0
+        return mavsdk_peer.serve_until_sigterm(server)
 
 
 def mavsdk_client(port: int, reps: int) -> int:
     """MAVSDK's param plugin against the autopilot on port: one warm-up, then ``reps`` timed
     get_all_params; prints one JSON line."""
-    from mavsdk.component_type import ComponentType
-    from mavsdk.mavsdk import Configuration, Mavsdk
     from mavsdk.plugins.param import Param
 
-    mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
-    out: dict = {"times_s": [], "counts": []}
-    try:
-        mavsdk.add_any_connection(f"udpout://127.0.0.1:{port}")
-        system = mavsdk.first_autopilot(10.0)
-        if system is None:
-            out["error"] = "no autopilot within 10 s"
-        else:
-            param = Param(system)
-            param.get_all_params()
-            pauses = random.Random(PAUSE_SEED)
-            for _ in range(reps):
-                time.sleep(pauses.uniform(*PAUSE_S))
-                t0 = time.perf_counter()
-                everything = param.get_all_params()
-                out["times_s"].append(time.perf_counter() - t0)
-                out["counts"].append(len(everything.int_params) + len(everything.float_params)
-                                     + len(everything.custom_params))
-            param.destroy()
-    except Exception as exc:  # reported in the table, not a crash of the whole bench
-        out["error"] = repr(exc)
-    finally:
-        mavsdk.destroy()
-    print("RESULT " + json.dumps(out), flush=True)
-    return 0
+    def body(system, out: dict) -> None:
+        param = Param(system)
+        param.get_all_params()
+        pauses = random.Random(PAUSE_SEED)
+        for _ in range(reps):
+            time.sleep(pauses.uniform(*PAUSE_S))
+            t0 = time.perf_counter()
+            everything = param.get_all_params()
+            out["times_s"].append(time.perf_counter() - t0)
+            out["counts"].append(len(everything.int_params) + len(everything.float_params)
+                                 + len(everything.custom_params))
+        param.destroy()
+
+    return mavsdk_peer.client_run(port, body, {"times_s": [], "counts": []})
 
 
 # ---------------------------------------------------------------------------------- the client
