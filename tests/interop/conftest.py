@@ -218,7 +218,9 @@ def spawn(tmp_path: Path) -> Iterator[Callable[..., SpawnedProcess]]:
 
     yield start
     for process in reversed(started):
-        process.stop(PROCESS_KILL_WAIT_S)
+        # MAVProxy reads its commands from stdin and does not act on SIGTERM while it waits
+        # there: closing its input is what ends it (otherwise every teardown waits 5 s)
+        process.stop(PROCESS_KILL_WAIT_S, end_of_input_first=process.name.startswith("mavproxy"))
 
 
 # ---------------------------------------------------------------------------------------------
