@@ -30,6 +30,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from ..mission.items import MissionItem
 from .fs import DirEntry
 from .protocol import FtpError, Nak
+from .upload import BufferedUpload
 
 MAGIC = 0x763D
 HEADER = struct.Struct("<HHHHH")
@@ -92,35 +93,18 @@ class PlanReader:
     abort = close
 
 
-class PlanWriter:
-    writable = True
-    size = 0
+class PlanWriter(BufferedUpload):
+    max_bytes = HEADER.size + MAX_ITEMS * ITEM.size
 
     def __init__(self, mission_type: int, source: PlanSource, release: Callable[[], None]) -> None:
+        super().__init__(release)
         self._type = mission_type
         self._source = source
-        self._release = release
-        self._buf = bytearray()
 
-    def read(self, offset: int, count: int) -> bytes:
-        raise FtpError(Nak.FAIL)
-
-    def write(self, offset: int, data: bytes) -> None:
-        end = offset + len(data)
-        if end > HEADER.size + MAX_ITEMS * ITEM.size:
-            raise FtpError(Nak.FAIL_ERRNO, errno.EFBIG)
-        if end > len(self._buf):
-            self._buf.extend(bytes(end - len(self._buf)))
-        self._buf[offset:end] = data
-
-    def close(self) -> None:
-        self._release()
-        items = decode_plan(bytes(self._buf), self._type)
+    def apply(self, data: bytes) -> None:
+        items = decode_plan(data, self._type)
         if items is None or self._source.write_plan(self._type, items) != M.MAV_MISSION_ACCEPTED:
             raise FtpError(Nak.FAIL_ERRNO, errno.EINVAL)
-
-    def abort(self) -> None:
-        self._release()
 
 
 class MissionFiles:

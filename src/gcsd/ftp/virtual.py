@@ -28,6 +28,7 @@ from typing import Protocol
 from .fs import DirEntry
 from .parampck import MAX_UPLOAD_BYTES, ParamLike, PckQuery, decode_upload, encode, parse_query
 from .protocol import DATA_MAX, FtpError, Nak
+from .upload import BufferedUpload
 
 PARAM_DIR, PARAM_FILE = "@PARAM", "param.pck"
 MISSION_DIR = "@MISSION"
@@ -96,37 +97,21 @@ class ParamPckReader:
     abort = close
 
 
-class ParamPckWriter:
-    writable = True
-    size = 0
+class ParamPckWriter(BufferedUpload):
+    max_bytes = MAX_UPLOAD_BYTES
+    too_big_errno = errno.EINVAL
 
     def __init__(self, source: ParamSource, release: Callable[[], None]) -> None:
+        super().__init__(release)
         self._source = source
-        self._release = release
-        self._buf = bytearray()
 
-    def read(self, offset: int, count: int) -> bytes:
-        raise FtpError(Nak.FAIL)
-
-    def write(self, offset: int, data: bytes) -> None:
-        if offset + len(data) > MAX_UPLOAD_BYTES:
-            raise FtpError(Nak.FAIL_ERRNO, errno.EINVAL)
-        end = offset + len(data)
-        if end > len(self._buf):
-            self._buf.extend(bytes(end - len(self._buf)))
-        self._buf[offset:end] = data
-
-    def close(self) -> None:
-        self._release()
-        params = decode_upload(bytes(self._buf))
+    def apply(self, data: bytes) -> None:
+        params = decode_upload(data)
         if params is None:
             raise FtpError(Nak.FAIL_ERRNO, errno.EINVAL)
         for p in params:
             self._source.set_from_file(p.name, p.value)
         self._source.commit()
-
-    def abort(self) -> None:
-        self._release()
 
 
 class VirtualFiles:
