@@ -18,6 +18,7 @@ import copy
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -361,3 +362,28 @@ def gcsd_daemon(tmp_path: Path, spawn) -> Iterator[Callable[..., GcsdDaemon]]:
         problems[-1] += "\n" + daemon.describe()
     if problems:
         pytest.fail("\n\n".join(problems), pytrace=False)
+
+
+# ---------------------------------------------------------------------------------------------
+# MAVProxy, shared by the interop tests that drive it
+
+
+def mavproxy_script() -> str:
+    """mavproxy.py from this interpreter's environment (skip the test if it is not installed)."""
+    script = shutil.which("mavproxy.py", path=str(Path(sys.executable).parent)) or shutil.which("mavproxy.py")
+    if script is None:
+        pytest.skip("mavproxy.py is not on PATH")
+    return script
+
+
+def expect_line(process: SpawnedProcess, daemon, pattern: str, timeout_s: float, since: int, what: str):
+    """The first output line of `process` after `since` matching `pattern`, or a failure that
+    shows both the process's and the daemon's output."""
+    found = process.output.wait_for(pattern, timeout_s, since=since)
+    if found is None:
+        pytest.fail(
+            f"{process.name} did not print {what} (/{pattern}/) within {timeout_s} s\n"
+            f"{process.describe()}\n\n{daemon.describe()}",
+            pytrace=False,
+        )
+    return found

@@ -9,16 +9,16 @@ one; a pymavlink ground station on `gcs2` reads the new value back from the flig
 from __future__ import annotations
 
 import re
-import shutil
 import sys
 import time
-from pathlib import Path
 
 import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from integration.bridge import NullModem, bridge_configs
+
+from .conftest import mavproxy_script
 
 pytest.importorskip("MAVProxy", reason="MAVProxy is a test extra: pip install -e .[test]")
 pytestmark = pytest.mark.interop
@@ -53,11 +53,8 @@ def test_mavproxy_fetches_and_sets_flight_controller_parameters_through_the_comp
         daemons.append(companion)
         before = read_fc(companion.port("gcs2"), "RC8_TRIM")
         assert before is not None, "the flight controller answers through the bridge"
-        script = shutil.which("mavproxy.py", path=str(Path(sys.executable).parent)) or shutil.which("mavproxy.py")
-        if script is None:
-            pytest.skip("mavproxy.py is not on PATH")
         mavproxy = spawn(
-            [sys.executable, script, f"--master=udpout:127.0.0.1:{companion.port('gcs1')}", "--no-state",
+            [sys.executable, mavproxy_script(), f"--master=udpout:127.0.0.1:{companion.port('gcs1')}", "--no-state",
              "--target-system=1", "--target-component=1", "--default-modules=param", "--cmd=set param_ftp 0"],
             name="mavproxy", cwd=tmp_path, env_overrides={"HOME": str(tmp_path)},
         )

@@ -24,7 +24,6 @@ import os
 import random
 import re
 import select
-import shutil
 import socket
 import sys
 import threading
@@ -44,6 +43,7 @@ pytest.importorskip("mavsdk.asyncio", reason="mavsdk is a test extra: pip instal
 
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
 from mavsdk.asyncio.plugins.ftp import FtpAsync
+from .conftest import mavproxy_script as _mavproxy_script  # noqa: E402
 
 pytestmark = pytest.mark.interop
 
@@ -73,13 +73,6 @@ def wait_until(condition, timeout_s: float, what: str, daemon) -> None:
 
 # ---------------------------------------------------------------------------------------------
 # MAVProxy
-
-
-def _mavproxy_script() -> str:
-    script = shutil.which("mavproxy.py", path=str(Path(sys.executable).parent)) or shutil.which("mavproxy.py")
-    if script is None:
-        pytest.skip("mavproxy.py is not on PATH")
-    return script
 
 
 class MavProxy:

@@ -12,9 +12,7 @@ Its console output is the observable: "Detected vehicle 1:1 on link 0", "Mode ST
 from __future__ import annotations
 
 import re
-import shutil
 import sys
-from pathlib import Path
 
 import pytest
 
@@ -45,13 +43,7 @@ GLOBAL_POSITION_INT_LINE = re.compile(
     r"GLOBAL_POSITION_INT \{time_boot_ms : \d+, lat : (?P<lat>-?\d+), lon : (?P<lon>-?\d+), "
     r"alt : (?P<alt>-?\d+), relative_alt : (?P<relative_alt>-?\d+)"
 )
-
-
-def _mavproxy_script() -> str:
-    script = shutil.which("mavproxy.py", path=str(Path(sys.executable).parent)) or shutil.which("mavproxy.py")
-    if script is None:
-        pytest.skip("mavproxy.py is not on PATH")
-    return script
+from .conftest import mavproxy_script as _mavproxy_script, expect_line as _expect  # noqa: E402
 
 
 @pytest.fixture
@@ -83,17 +75,6 @@ Ctrl-D; `exit` is refused unless its `requireexit` setting is on), then SIGTERM,
     yield start
     for process in started:
         process.stop(5.0, end_of_input_first=True)
-
-
-def _expect(process, daemon, pattern: str, timeout_s: float, since: int, what: str):
-    found = process.output.wait_for(pattern, timeout_s, since=since)
-    if found is None:
-        pytest.fail(
-            f"MAVProxy did not print {what} (/{pattern}/) within {timeout_s} s\n"
-            f"{process.describe()}\n\n{daemon.describe()}",
-            pytrace=False,
-        )
-    return found
 
 
 def _last_message(process, daemon, name: str, line: re.Pattern, timeout_s: float = 3.0) -> re.Match:

@@ -17,12 +17,10 @@ import asyncio
 import json
 import os
 import re
-import shutil
 import signal
 import sys
 import time
 from contextlib import asynccontextmanager
-from pathlib import Path
 
 import pytest
 
@@ -40,6 +38,7 @@ from integration.helpers import Client, udp_url  # noqa: E402
 from integration.mission_client import LossyProxy, MissionClient  # noqa: E402
 
 from .conftest import DEFAULT_HOME, REPO_ROOT  # noqa: E402
+from .conftest import mavproxy_script as _mavproxy_script  # noqa: E402
 
 DISCOVERY_WAIT_S = 5.0
 LONG_REASON = "takes minutes: set GCSD_LONG_TESTS=1"
@@ -181,13 +180,6 @@ async def test_mavsdk_sees_an_invalid_fence_refused_and_the_old_one_kept(gcsd_da
 
 
 # --- MAVProxy --------------------------------------------------------------------------------------
-
-
-def _mavproxy_script() -> str:
-    script = shutil.which("mavproxy.py", path=str(Path(sys.executable).parent)) or shutil.which("mavproxy.py")
-    if script is None:
-        pytest.skip("mavproxy.py is not on PATH")
-    return script
 
 
 @pytest.fixture

@@ -21,7 +21,6 @@ from __future__ import annotations
 import asyncio
 import os
 import re
-import shutil
 import struct
 import sys
 import time
@@ -39,6 +38,7 @@ pytest.importorskip("mavsdk.asyncio", reason="mavsdk is a test extra: pip instal
 
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
 from mavsdk.asyncio.plugins.param import ParamAsync, ParamError  # noqa: E402
+from .conftest import mavproxy_script as _mavproxy_script, expect_line as _expect  # noqa: E402
 
 pytestmark = pytest.mark.interop
 
@@ -146,13 +146,6 @@ def _param_count(port: int) -> int:
 # MAVProxy
 
 
-def _mavproxy_script() -> str:
-    script = shutil.which("mavproxy.py", path=str(Path(sys.executable).parent)) or shutil.which("mavproxy.py")
-    if script is None:
-        pytest.skip("mavproxy.py is not on PATH")
-    return script
-
-
 def _start_mavproxy(spawn, tmp_path: Path, port: int):
     """Headless MAVProxy with its default param and ftp modules, parameter download by list."""
     return spawn(
@@ -168,17 +161,6 @@ def _start_mavproxy(spawn, tmp_path: Path, port: int):
         cwd=tmp_path,
         env_overrides={"HOME": str(tmp_path)},
     )
-
-
-def _expect(process, daemon, pattern: str, timeout_s: float, since: int, what: str):
-    found = process.output.wait_for(pattern, timeout_s, since=since)
-    if found is None:
-        pytest.fail(
-            f"MAVProxy did not print {what} (/{pattern}/) within {timeout_s} s\n"
-            f"{process.describe()}\n\n{daemon.describe()}",
-            pytrace=False,
-        )
-    return found
 
 
 def _shown_value(process, daemon, name: str, accept, timeout_s: float) -> str:

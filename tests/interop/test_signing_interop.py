@@ -30,7 +30,6 @@ import hashlib
 import json
 import os
 import re
-import shutil
 import subprocess
 import sys
 import time
@@ -50,6 +49,7 @@ from mavsdk.asyncio.plugins.action import ActionAsync, ActionError  # noqa: E402
 from mavsdk.asyncio.plugins.telemetry import FixType, TelemetryAsync  # noqa: E402
 
 from .conftest import REPO_ROOT  # noqa: E402
+from .conftest import mavproxy_script as _mavproxy_script, expect_line as _expect  # noqa: E402
 
 pytestmark = pytest.mark.interop
 
@@ -98,13 +98,6 @@ def _status(daemon) -> dict[str, dict]:
 # MAVProxy
 
 
-def _mavproxy_script() -> str:
-    script = shutil.which("mavproxy.py", path=str(Path(sys.executable).parent)) or shutil.which("mavproxy.py")
-    if script is None:
-        pytest.skip("mavproxy.py is not on PATH")
-    return script
-
-
 def _start_mavproxy(spawn, tmp_path: Path, port: int, name: str, *extra: str):
     """Headless MAVProxy with the modules this test uses; HOME=tmp_path so no key file of the
     user's (~/.mavproxy/signing.keys) is read."""
@@ -122,17 +115,6 @@ def _start_mavproxy(spawn, tmp_path: Path, port: int, name: str, *extra: str):
         cwd=tmp_path,
         env_overrides={"HOME": str(tmp_path)},
     )
-
-
-def _expect(process, daemon, pattern: str, timeout_s: float, since: int, what: str):
-    found = process.output.wait_for(pattern, timeout_s, since=since)
-    if found is None:
-        pytest.fail(
-            f"{process.name} did not print {what} (/{pattern}/) within {timeout_s} s\n"
-            f"{process.describe()}\n\n{daemon.describe()}",
-            pytrace=False,
-        )
-    return found
 
 
 def _fetched_value(process, daemon, name: str, accept, timeout_s: float) -> float:

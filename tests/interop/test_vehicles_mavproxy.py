@@ -11,12 +11,11 @@
 from __future__ import annotations
 
 import re
-import shutil
 import sys
 import time
-from pathlib import Path
 
 import pytest
+from .conftest import mavproxy_script as _mavproxy_script, expect_line as _expect  # noqa: E402
 
 pytest.importorskip("MAVProxy", reason="MAVProxy is a test extra: pip install -e .[test]")
 
@@ -24,13 +23,6 @@ ACK_WAIT_S = 3.0
 MODE_WAIT_S = 5.0
 GLOBAL_POSITION_INT_LINE = re.compile(r"GLOBAL_POSITION_INT \{time_boot_ms : \d+, lat : -?\d+, lon : -?\d+, "
                                       r"alt : -?\d+, relative_alt : (?P<relative_alt>-?\d+)")
-
-
-def _mavproxy_script() -> str:
-    script = shutil.which("mavproxy.py", path=str(Path(sys.executable).parent)) or shutil.which("mavproxy.py")
-    if script is None:
-        pytest.skip("mavproxy.py is not on PATH")
-    return script
 
 
 @pytest.fixture
@@ -49,14 +41,6 @@ def mavproxy(spawn, tmp_path):
     yield start
     for process in started:
         process.stop(5.0, end_of_input_first=True)
-
-
-def _expect(process, daemon, pattern: str, timeout_s: float, since: int, what: str):
-    found = process.output.wait_for(pattern, timeout_s, since=since)
-    if found is None:
-        pytest.fail(f"MAVProxy did not print {what} (/{pattern}/) within {timeout_s} s\n"
-                    f"{process.describe()}\n\n{daemon.describe()}", pytrace=False)
-    return found
 
 
 def _relative_alt_m(process, daemon, timeout_s: float, accept) -> float:
