@@ -53,7 +53,7 @@ if __package__ in (None, ""):  # run as a script: python bench/ftp.py
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from bench import mavsdk_peer
+from bench import mavsdk_peer, report
 from bench.frames import walk_frames
 from bench.routers import Launched, _launch, free_udp_port, gcsd_config
 
@@ -375,26 +375,7 @@ def notes(results: dict[str, Result]) -> list[str]:
 
 
 def table(results: dict[str, Result]) -> str:
-    head = ("metric", "gcsd", "MAVSDK ftp_server", "gcsd/MAVSDK", "SPEC target", "gcsd meets")
-    body = []
-    for name, gv, mv, better, target, ok in rows(results):
-        ratio = "n/a"
-        if gv is not None and mv not in (None, 0):
-            ratio = f"{gv / mv:.2f}" + {"hi": " (higher better)", "lo": " (lower better)"}.get(better, "")
-        meets = "" if gv is None else ("yes" if ok(gv) else "NO")
-        body.append((name, _fmt(gv), _fmt(mv), ratio, target, meets))
-    widths = [max(len(r[i]) for r in (head, *body)) for i in range(len(head))]
-
-    def line(r):
-        return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
-
-    return "\n".join([line(head), "  ".join("-" * w for w in widths), *map(line, body), "", *notes(results)])
-
-
-def _fmt(v):
-    if v is None:
-        return "n/a"
-    return f"{v:,.0f}" if abs(v) >= 1000 else f"{v:.1f}" if abs(v) >= 10 else f"{v:.3f}"
+    return report.comparison_table("MAVSDK ftp_server", rows(results), notes(results))
 
 
 def main(argv: list[str]) -> int:

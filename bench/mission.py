@@ -40,7 +40,7 @@ from pathlib import Path
 if __package__ in (None, ""):  # run as a script: python bench/mission.py
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from bench import mavsdk_peer  # noqa: E402
+from bench import mavsdk_peer, report  # noqa: E402
 from bench.routers import Launched, _launch, free_udp_port, gcsd_config, udp_port_bound  # noqa: E402
 
 TOTAL = 1000
@@ -214,21 +214,14 @@ def table(results: dict[str, ServerResult]) -> str:
         v = getattr(r, attr) if r else None
         return None if v is None else v * 1000
 
-    head = ("metric", "gcsd", "MAVSDK mission_raw_server", "gcsd/MAVSDK", "SPEC target", "gcsd meets")
-    body = []
-    for label, attr in (("upload, median (ms)", "upload_median_s"), ("upload, worst (ms)", "upload_worst_s"),
-                        ("download, median (ms)", "download_median_s"),
-                        ("download, worst (ms)", "download_worst_s")):
-        gv, mv = ms(g, attr), ms(m, attr)
-        ratio = f"{gv / mv:.2f} (lower better)" if gv is not None and mv else "n/a"
-        meets = "" if gv is None else ("yes" if gv <= SPEC_TARGET_S * 1000 else "NO")
-        body.append((f"mission {label}, {TOTAL} items, MAVSDK mission_raw", _fmt(gv), _fmt(mv), ratio,
-                     f"<= {SPEC_TARGET_S * 1000:.0f}", meets))
-    widths = [max(len(r[i]) for r in (head, *body)) for i in range(len(head))]
-
-    def line(r):
-        return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
-
+    target_ms = SPEC_TARGET_S * 1000
+    rows = [
+        (f"mission {label}, {TOTAL} items, MAVSDK mission_raw", ms(g, attr), ms(m, attr), "lo",
+         f"<= {target_ms:.0f}", lambda v: v <= target_ms)
+        for label, attr in (("upload, median (ms)", "upload_median_s"), ("upload, worst (ms)", "upload_worst_s"),
+                            ("download, median (ms)", "download_median_s"),
+                            ("download, worst (ms)", "download_worst_s"))
+    ]
     notes = []
     for r in (g, m):
         if r is None:
@@ -241,11 +234,7 @@ def table(results: dict[str, ServerResult]) -> str:
             differing = sum(bool(x) for x in r.mismatches)
             notes.append(f"{r.name}: uploads {ups} ms; downloads {downs} ms; downloaded plan differing from "
                          f"the uploaded one: {differing} of {len(r.mismatches)}; {r.stop}")
-    return "\n".join([line(head), "  ".join("-" * w for w in widths), *map(line, body), "", *notes])
-
-
-def _fmt(v):
-    return "n/a" if v is None else (f"{v:,.0f}" if abs(v) >= 1000 else f"{v:.1f}")
+    return report.comparison_table("MAVSDK mission_raw_server", rows, notes)
 
 
 def main(argv: list[str]) -> int:

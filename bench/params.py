@@ -59,7 +59,7 @@ if __package__ in (None, ""):  # run as a script: python bench/params.py
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
 
-from bench import mavsdk_peer  # noqa: E402
+from bench import mavsdk_peer, report  # noqa: E402
 from bench.frames import walk_frames  # noqa: E402
 from bench.peers import _big_buffers  # noqa: E402
 from bench.routers import (  # noqa: E402
@@ -543,30 +543,7 @@ def notes(results: dict[str, ServerResult]) -> list[str]:
 
 
 def table(results: dict[str, ServerResult]) -> str:
-    head = ("metric", "gcsd", "MAVSDK param_server", "gcsd/MAVSDK", "SPEC target", "gcsd meets")
-    body = []
-    for name, gv, mv, better, target, ok in rows(results):
-        ratio = "n/a"
-        if gv is not None and mv not in (None, 0):
-            ratio = f"{gv / mv:.2f}" + {"hi": " (higher better)", "lo": " (lower better)"}.get(better, "")
-        meets = "" if ok is None or gv is None else ("yes" if ok(gv) else "NO")
-        body.append((name, _fmt(gv), _fmt(mv), ratio, target, meets))
-    widths = [max(len(r[i]) for r in (head, *body)) for i in range(len(head))]
-
-    def line(r):
-        return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
-
-    return "\n".join([line(head), "  ".join("-" * w for w in widths), *map(line, body), "", *notes(results)])
-
-
-def _fmt(v):
-    if v is None:
-        return "n/a"
-    if abs(v) >= 1000:
-        return f"{v:,.0f}"
-    if abs(v) >= 10:
-        return f"{v:.1f}"
-    return f"{v:.3f}"
+    return report.comparison_table("MAVSDK param_server", rows(results), notes(results))
 
 
 def main(argv: list[str]) -> int:

@@ -1,0 +1,36 @@
+"""The side-by-side table the comparison benchmarks print: metric, gcsd, the peer, the ratio,
+SPEC's target and whether gcsd meets it. A row is (metric, gcsd value, peer value, "hi" | "lo"
+(which way is better) | None, target text, check(gcsd value) -> bool | None)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+
+Row = tuple[str, float | None, float | None, str | None, str, Callable[[float], bool] | None]
+
+
+def fmt(v: float | None) -> str:
+    if v is None:
+        return "n/a"
+    if abs(v) >= 1000:
+        return f"{v:,.0f}"
+    if abs(v) >= 10:
+        return f"{v:.1f}"
+    return f"{v:.3f}"
+
+
+def comparison_table(peer: str, rows: Iterable[Row], notes: Iterable[str] = ()) -> str:
+    head = ("metric", "gcsd", peer, "gcsd/MAVSDK", "SPEC target", "gcsd meets")
+    body = []
+    for name, gv, mv, better, target, ok in rows:
+        ratio = "n/a"
+        if gv is not None and mv not in (None, 0):
+            ratio = f"{gv / mv:.2f}" + {"hi": " (higher better)", "lo": " (lower better)"}.get(better, "")
+        meets = "" if ok is None or gv is None else ("yes" if ok(gv) else "NO")
+        body.append((name, fmt(gv), fmt(mv), ratio, target, meets))
+    widths = [max(len(r[i]) for r in (head, *body)) for i in range(len(head))]
+
+    def line(r):
+        return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
+
+    return "\n".join([line(head), "  ".join("-" * w for w in widths), *map(line, body), "", *notes])
