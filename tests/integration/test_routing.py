@@ -26,7 +26,16 @@ import pytest
 from gcsd import control
 
 from .helpers import (
-    M, VEHICLE, Client, Received, from_vehicle, is_ack, udp_channel, udp_url, v2_frame, wait_for,
+    VEHICLE,
+    Client,
+    M,
+    Received,
+    from_vehicle,
+    is_ack,
+    udp_channel,
+    udp_url,
+    v2_frame,
+    wait_for,
 )
 
 GCS1 = (255, 190)
