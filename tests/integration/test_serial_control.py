@@ -53,8 +53,12 @@ def test_serial_control_writes_to_the_device_and_replies_with_what_it_answers(da
         gcs.send(_request(M.SERIAL_CONTROL_DEV_GPS2, b"x"))  # not configured
         gcs.send(_request(M.SERIAL_CONTROL_DEV_SHELL, b"ls\n"))
         gcs.send(_request(M.SERIAL_CONTROL_DEV_GPS1, b"y", flags=M.SERIAL_CONTROL_FLAG_REPLY))
-        pump([gcs], 0.6)
-        assert gcs.since(mark, "SERIAL_CONTROL") == []
+        # the control, just after on the same socket: a good request is answered (empty) after its
+        # 400 ms timeout, later than a wrong reply to one of the three (timeouts 300 ms) would come
+        gcs.send(_request(M.SERIAL_CONTROL_DEV_GPS1, b"", timeout_ms=400))
+        assert wait_for(gcs, lambda r: r.type == "SERIAL_CONTROL", 3.0, mark) is not None
+        replies = gcs.since(mark, "SERIAL_CONTROL")
+        assert [(r.msg.device, r.msg.count) for r in replies] == [(M.SERIAL_CONTROL_DEV_GPS1, 0)]
     finally:
         os.close(master)
         os.close(slave)
