@@ -52,7 +52,9 @@ def test_a_reply_goes_only_to_the_requesting_channel_targeted_at_the_requester(d
     mark_a, mark_b = a.mark(), b.mark()
     ftp_request(a, Op.LIST_DIRECTORY, b"/", seq=41)
     assert wait_for(a, is_type("FILE_TRANSFER_PROTOCOL", VEHICLE), since=mark_a) is not None
-    pump([a, b], 0.5)
+    # the control on b: a's next heartbeat is forwarded to b, after any wrong copy of the reply
+    beat = a.heartbeat()
+    assert wait_for(b, lambda r: r.raw == beat, since=mark_b, others=[a]) is not None
     [(msg, reply)] = ftp_replies(a, mark_a)
     assert (msg.target_network, msg.target_system, msg.target_component) == (0, 255, 190)
     assert (reply.seq, reply.req_opcode) == (42, Op.LIST_DIRECTORY)
