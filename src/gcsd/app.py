@@ -14,6 +14,7 @@ import structlog
 from .config import Config
 from .gcs import GCS
 from .notify import Notifier
+from .transport import ChannelStartError
 
 log = structlog.get_logger("gcsd")
 
@@ -43,6 +44,9 @@ async def run_daemon(config: Config) -> int:
         )
         notifier = Notifier()
         await _run_with_notify(gcs, stop, notifier)
+    except ChannelStartError as exc:  # a taken port: one clear line, no traceback
+        log.error("daemon_failed", error=str(exc))
+        return 1
     except Exception:
         log.exception("daemon_failed")
         return 1

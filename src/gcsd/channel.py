@@ -1,11 +1,31 @@
 """A channel: one configured MAVLink link and the peers on it, independent of the transport.
 
-A channel has one or more peers (each UDP client of a udp-server, each TCP connection, the one
-serial port). Bytes from a peer go through that peer's FrameParser; good frames are handed to the
-`on_frame` callback (the GCS object). Output goes to every peer of the channel.
+A channel has peers (each ground station of a udp-server, each TCP connection, the one serial
+port or remote of a client channel). Bytes from a peer go through that peer's FrameParser.
 
-Output version follows the peer: a channel starts in its configured version and then speaks the
-version of the last frame it received. Forwarded frames are never converted.
+Receive, per frame, in this order (SPEC "Signing", "Channels"):
+1. `verify(frame)` (the GCS's signing check) comes before anything else looks at the frame.
+   A frame that fails it is counted as a reject (`on_reject`) and changes nothing else: no
+   peer, no route, no version, no activity, no packets_in.
+2. The frame is accepted from its peer: the peer's last-heard time, its output version, and
+   its admission (below). Version: a peer starts in the channel's configured version until its
+   first good frame, which sets it (a ground station that speaks only MAVLink1 gets MAVLink1);
+   from then on it only goes up, to MAVLink2 once the peer sends MAVLink2 (ArduPilot's rule),
+   so one MAVLink1 station never changes what another gets. RADIO_STATUS and RADIO (a radio's
+   own reports) count for nothing.
+3. `on_frame(channel, frame, now)`: routing and local handling.
+
+Admission (no amplification): a udp-server answers an address only after a good frame from it;
+datagrams from unknown addresses go through one shared parser (a datagram holds whole frames,
+so nothing carries over between them) and cost no state. A tcp-server connection is served at
+once when the channel needs no signature (TCP cannot be spoofed and a plain pymavlink client
+waits for our HEARTBEAT first), otherwise only after a good signed frame. Client and serial
+channels have their one peer from the start. At most `max_peers` peers are served; a new one
+replaces the one silent the longest. A udp-server forgets a peer silent for 30 s (`sweep`).
+
+Output: every admitted peer gets every frame. Forwarded frames go out byte-exact; our own
+messages are encoded once per version in use on the channel (usually once, MAVLink2 signed
+when signing is active), each version with its own sequence numbers.
 
 The byte budget (`bandwidth`, bytes/s) is a token bucket holding at most 100 ms of traffic (and
 at least one maximal frame). Scheduled telemetry waits for it; a frame that finds no budget is
@@ -22,13 +42,16 @@ from typing import Protocol
 
 from .codec import Encoder, Frame, FrameParser, MAVLink_message, ParseStats
 from .config import ChannelConfig
-from .router import ChannelPolicy
+from .router import MSG_ID_RADIO, MSG_ID_RADIO_STATUS, ChannelPolicy
 
 MAX_FRAME_BYTES = 280
 UDP_PEER_TIMEOUT_S = 30.0
+PEER_SWEEP_INTERVAL_S = 1.0
+DEFAULT_MAX_PEERS = 8
 # ParseStats field -> the channel counter it is reported as
 _INBOUND = {"frames": "packets_in", "bytes": "bytes_in", "parse_errors": "parse_errors",
             "crc_errors": "crc_errors", "unknown_ids": "unknown_ids", "seq_gaps": "seq_gaps"}
+_NO_STATE = (MSG_ID_RADIO_STATUS, MSG_ID_RADIO)  # a radio's own reports: they say nothing about the peer
 
 
 @dataclass
@@ -40,7 +63,8 @@ class ChannelStats:
     bytes_out: int = 0
     signature_rejects: int = 0
     drops: int = 0  # frames not sent for lack of budget or buffer space
-    peers_forgotten: int = 0
+    peers_forgotten: int = 0  # silent for UDP_PEER_TIMEOUT_S
+    peers_replaced: int = 0  # dropped for a new peer when max_peers were served
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -51,15 +75,21 @@ class PeerWriter(Protocol):
 
 
 class Peer:
-    """One remote end on a channel: its parser, its writer and when it was last heard."""
+    """One remote end on a channel: its parser, its writer, when it was last heard (a good
+    frame), the MAVLink version it gets, and whether it is served (admitted)."""
 
-    __slots__ = ("key", "last_rx_s", "parser", "write")
+    __slots__ = ("admitted", "close", "heard", "key", "last_rx_s", "mavlink1", "parser", "write")
 
-    def __init__(self, key: object, write: PeerWriter, now: float, keep_bad_crc: bool = False) -> None:
+    def __init__(self, key: object, write: PeerWriter | None, now: float, parser: FrameParser,
+                 mavlink1: bool = False, close: Callable[[], None] | None = None) -> None:
         self.key = key
-        self.parser = FrameParser(ParseStats(), keep_bad_crc=keep_bad_crc)
+        self.parser = parser
         self.write = write
         self.last_rx_s = now
+        self.mavlink1 = mavlink1
+        self.admitted = False
+        self.heard = False  # a good frame has set its version
+        self.close = close
 
 
 class TokenBucket:
@@ -87,6 +117,10 @@ class TokenBucket:
         return max(0.0, (nbytes - self.tokens) / self.rate_bps)
 
 
+def _accept_all(frame: Frame) -> str | None:
+    return None
+
+
 class Channel:
     def __init__(self, index: int, config: ChannelConfig, clock: Callable[[], float] = time.monotonic) -> None:
         self.index = index
@@ -95,35 +129,95 @@ class Channel:
         self.clock = clock
         self.stats = ChannelStats()
         self.policy = ChannelPolicy(private=config.private, no_forward="no_forward" in config.options)
-        self.peers: dict[object, Peer] = {}
-        self.mavlink1 = config.mavlink == 1
+        self.peers: dict[object, Peer] = {}  # admitted: served
+        self._waiting: dict[object, Peer] = {}  # stream connections not served yet
+        self.max_peers = getattr(config, "max_peers", None) or DEFAULT_MAX_PEERS
+        self._start_v1 = config.mavlink == 1
+        self._v1_peers = 0
         self.active = False  # has received something other than RADIO_STATUS
         self.budget = TokenBucket(config.bandwidth, clock()) if config.bandwidth else None
         self.local_address: tuple[str, int] | None = None
-        self.on_frame: Callable[[Channel, Frame], None] = lambda channel, frame: None
+        self.verify: Callable[[Frame], str | None] = _accept_all  # None: accepted, else the reject reason
+        self.on_frame: Callable[[Channel, Frame, float], None] = lambda channel, frame, now: None
+        self.on_reject: Callable[[Channel, Frame, str, float], None] = lambda channel, frame, reason, now: None
         self.on_bad_crc: Callable[[Channel, bytes], None] = lambda channel, raw: None
-        self.on_peer_joined: Callable[[Channel], None] = lambda channel: None
-        self._encoders: dict[tuple[int, int], Encoder] = {}
+        self.on_peer_joined: Callable[[Channel, Peer], None] = lambda channel, peer: None
+        self.make_writer: Callable[[object], PeerWriter] | None = None  # the transport's, for admitted strangers
+        self.serve_on_connect = True  # tcp-server: serve a connection before its first good frame
+        self._encoders: dict[tuple[int, int, bool], Encoder] = {}
         self._keep_bad_crc = "forward_bad_crc" in config.options
+        self._strangers = FrameParser(ParseStats(), keep_bad_crc=False)  # datagrams from unknown addresses
         self.unsigned_ok = "unsigned_ok" in config.options
         self.signing = None  # the process's Signing, set by the GCS; outgoing frames are signed when it has a key
         self.wall: Callable[[], float] = time.time
         self.signature_reject_reasons: dict[str, int] = {}
         self.tlog = None  # a TlogWriter shared by all channels, when log.tlog is set
         self._retired = ParseStats()  # counters of peers that are gone
+        self._rejected_frames = 0
+        self._rejected_bytes = 0
+        self._last_sweep_s = 0.0
         # a high-latency link is silent until CONTROL_HIGH_LATENCY enables it (REFERENCE.md 11)
         self.output_enabled = "high_latency" not in config.options
         self.muted_frames = 0
 
     # --- peers -----------------------------------------------------------------------------
-    def add_peer(self, key: object, write: PeerWriter) -> Peer:
-        peer = Peer(key, write, self.clock(), self._keep_bad_crc)
-        self.peers[key] = peer
-        self.on_peer_joined(self)
+    @property
+    def mavlink1(self) -> bool:
+        """True when no peer takes MAVLink2 (then only MAVLink1 goes out)."""
+        return self._v1_peers == len(self.peers) if self.peers else self._start_v1
+
+    def _new_parser(self) -> FrameParser:
+        return FrameParser(ParseStats(), keep_bad_crc=self._keep_bad_crc)
+
+    def add_peer(self, key: object, write: PeerWriter, now: float | None = None) -> Peer:
+        """A peer served from the start (the remote of a client channel, a serial port)."""
+        peer = Peer(key, write, self.clock() if now is None else now, self._new_parser(), self._start_v1)
+        self._admit(peer)
         return peer
+
+    def connect_peer(self, key: object, write: PeerWriter, close: Callable[[], None] | None = None) -> Peer:
+        """A tcp-server connection: served now, or after its first good frame (`serve_on_connect`)."""
+        peer = Peer(key, write, self.clock(), self._new_parser(), self._start_v1, close)
+        if self.serve_on_connect:
+            self._admit(peer)
+        else:
+            self._waiting[key] = peer
+        return peer
+
+    def stranger(self, key: object, now: float) -> Peer:
+        """A datagram's sender that is not a peer: parsed by the shared parser, served only if
+        one of its frames is accepted."""
+        return Peer(key, None, now, self._strangers, self._start_v1)
+
+    def _admit(self, peer: Peer) -> None:
+        if len(self.peers) >= self.max_peers:
+            silent = min(self.peers.values(), key=lambda p: p.last_rx_s)
+            self.remove_peer(silent.key)
+            self.stats.peers_replaced += 1
+            if silent.close is not None:
+                silent.close()
+        if peer.write is None:
+            peer.write = self.make_writer(peer.key)
+        if peer.parser is self._strangers:
+            peer.parser = self._new_parser()  # its next datagrams get a parser of its own
+        self._waiting.pop(peer.key, None)
+        peer.admitted = True
+        self.peers[peer.key] = peer
+        self._v1_peers += peer.mavlink1
+        self.on_peer_joined(self, peer)
+
+    def _set_version(self, peer: Peer, mavlink1: bool) -> None:
+        peer.heard = True
+        if peer.admitted:
+            self._v1_peers += mavlink1 - peer.mavlink1
+        peer.mavlink1 = mavlink1
 
     def remove_peer(self, key: object) -> None:
         peer = self.peers.pop(key, None)
+        if peer is not None:
+            self._v1_peers -= peer.mavlink1
+        else:
+            peer = self._waiting.pop(key, None)
         if peer is not None:
             self._retire(peer.parser.stats)
 
@@ -139,26 +233,47 @@ class Channel:
             self.stats.peers_forgotten += 1
         return gone
 
+    def sweep(self, now: float) -> list[object]:
+        """A udp-server's peers silent for UDP_PEER_TIMEOUT_S are forgotten (checked once a second)."""
+        if self.config.type != "udp-server" or now - self._last_sweep_s < PEER_SWEEP_INTERVAL_S:
+            return []
+        self._last_sweep_s = now
+        return self.forget_silent_peers(now)
+
     # --- receive ---------------------------------------------------------------------------
-    def receive(self, peer: Peer, data: bytes, datagram: bool = False) -> None:
-        peer.last_rx_s = self.clock()
-        frames = peer.parser.feed(data)
-        if datagram and peer.parser.pending_bytes():
-            peer.parser.reset()  # a datagram holds whole frames; the rest was truncated
-        if peer.parser.bad_crc_frames:
-            bad, peer.parser.bad_crc_frames = peer.parser.bad_crc_frames, []
-            for raw in bad:
-                self.on_bad_crc(self, raw)
-        on_frame = self.on_frame
+    def receive(self, peer: Peer, data: bytes, now: float, datagram: bool = False) -> None:
+        parser = peer.parser
+        frames = parser.feed(data)
+        if datagram and parser.pending_bytes():
+            parser.reset()  # a datagram holds whole frames; the rest was truncated
+        if parser.bad_crc_frames:
+            bad, parser.bad_crc_frames = parser.bad_crc_frames, []
+            if peer.admitted:  # never relay what an unknown source sent
+                for raw in bad:
+                    self.on_bad_crc(self, raw)
+        verify, on_frame, tlog = self.verify, self.on_frame, self.tlog
         for frame in frames:
-            self.mavlink1 = frame.version == 1
-            on_frame(self, frame)
+            if tlog is not None:
+                tlog.record(frame.raw, self.wall())
+            reason = verify(frame)
+            if reason is not None:
+                self._rejected_frames += 1
+                self._rejected_bytes += len(frame.raw)
+                self.on_reject(self, frame, reason, now)
+                continue
+            if frame.msgid not in _NO_STATE:
+                peer.last_rx_s = now
+                if peer.mavlink1 and frame.version == 2 or not peer.heard:
+                    self._set_version(peer, frame.version == 1)
+                if not peer.admitted:
+                    self._admit(peer)
+            on_frame(self, frame, now)
 
     # --- send ------------------------------------------------------------------------------
-    def encoder(self, sysid: int, compid: int) -> Encoder:
-        enc = self._encoders.get((sysid, compid))
+    def encoder(self, sysid: int, compid: int, mavlink1: bool = False) -> Encoder:
+        enc = self._encoders.get((sysid, compid, mavlink1))
         if enc is None:
-            enc = self._encoders[(sysid, compid)] = Encoder(sysid, compid)
+            enc = self._encoders[(sysid, compid, mavlink1)] = Encoder(sysid, compid)
         return enc
 
     def has_room(self, nbytes: int = MAX_FRAME_BYTES) -> bool:
@@ -173,6 +288,10 @@ class Channel:
 
     def write(self, raw: bytes) -> bool:
         """Send raw bytes to every peer, if the budget allows; False (and a counted drop) if not."""
+        return self._write(raw, None)
+
+    def _write(self, raw: bytes, mavlink1: bool | None) -> bool:
+        """Write to every peer, or to the peers of one version; budget, tlog and counters."""
         if not self.peers:
             return True  # nobody to send to is not a failure of the link
         if not self.output_enabled:
@@ -185,6 +304,8 @@ class Channel:
             self.tlog.record(raw, self.wall())
         sent = False
         for peer in list(self.peers.values()):
+            if mavlink1 is not None and peer.mavlink1 != mavlink1:
+                continue
             if peer.write(raw):
                 sent = True
             else:
@@ -195,23 +316,39 @@ class Channel:
         return sent
 
     def send_message(self, msg: MAVLink_message, sysid: int, compid: int) -> bool:
-        """Encode a message from one of our components for this link and write it."""
+        """Encode a message from one of our components for this link's peers and write it."""
+        peers = len(self.peers)
+        if not peers:
+            return True
+        v1 = self._v1_peers
+        if v1 == 0:
+            return self._send_as(msg, sysid, compid, False, None)
+        if v1 == peers:
+            return self._send_as(msg, sysid, compid, True, None)
+        sent_v2 = self._send_as(msg, sysid, compid, False, False)
+        return self._send_as(msg, sysid, compid, True, True) and sent_v2
+
+    def _send_as(self, msg: MAVLink_message, sysid: int, compid: int, mavlink1: bool, only: bool | None) -> bool:
         signing = self.signing
         sign = None
-        if signing is not None and signing.key is not None and not self.mavlink1:
+        if signing is not None and signing.key is not None and not mavlink1:
             sign = (signing.key, self.index & 0xFF, signing.next_timestamp(self.wall()))
-        raw = self.encoder(sysid, compid).encode(msg, self.mavlink1, sign)
+        raw = self.encoder(sysid, compid, mavlink1).encode(msg, mavlink1, sign)
         if raw is None:
-            return True  # not representable on this link version: nothing to send
-        return self.write(raw)
+            return True  # not representable in MAVLink1: nothing to send
+        return self._write(raw, only)
 
     # --- counters --------------------------------------------------------------------------
     def snapshot(self) -> dict[str, int]:
-        """Counters of the channel and all its peers, past and present."""
+        """Counters of the channel and all its peers, past and present. packets_in and bytes_in
+        count accepted frames only: a rejected frame shows in signature_rejects alone."""
         out = self.stats.as_dict()
-        parse = [p.parser.stats for p in self.peers.values()] + [self._retired]
+        parse = [p.parser.stats for p in self.peers.values()] + [p.parser.stats for p in self._waiting.values()]
+        parse += [self._retired, self._strangers.stats]
         for name, key in _INBOUND.items():
             out[key] = sum(getattr(s, name) for s in parse)
+        out["packets_in"] -= self._rejected_frames
+        out["bytes_in"] -= self._rejected_bytes
         out["peers"] = len(self.peers)
         for reason, n in self.signature_reject_reasons.items():
             out[f"signature_rejects_{reason}"] = n

@@ -1,11 +1,17 @@
 """The GCS object: the composition root. It wires channels, the router and the local
 components (one VehicleNode per simulated vehicle) and handles no message itself.
 
-Receive path for every good frame on a channel: mark the channel active (anything but
-RADIO_STATUS), ask the router (learn, forward, process locally?), write the raw frame to the
-chosen channels, then hand the decoded message to the local component(s) it is for. Frames with
-a bad CRC are dropped and counted, or, on a `forward_bad_crc` channel, forwarded unchanged as
-broadcasts and never processed.
+Receive path for every good frame on a channel: the channel has it verified first (the signing
+check, `_verify`; a frame that fails changes nothing but the reject counters, see channel.py),
+then here: mark the channel active (anything but RADIO_STATUS), ask the router (learn, forward,
+process locally?), write the raw frame to the chosen channels, then hand the decoded message to
+the local component(s) it is for. Frames with a bad CRC are dropped and counted, or, on a
+`forward_bad_crc` channel, forwarded unchanged as broadcasts and never processed.
+
+Tasks (one TaskGroup): one per channel (receive in callbacks, send passes), the simulation (every
+node's autopilot and simulation or embedding backend, SIM_RATE_HZ, whether or not any link is
+up), the stats log and the signing timestamp saver. Every part runs inside an error boundary
+(boundary.py): one `ErrorCounts` per daemon, shown by `gcsd status`.
 
 Send passes: each vehicle node says when it next needs one on a channel (its deadline); a
 channel's pass runs only the nodes that are due, that were woken (something queued) or that
@@ -23,7 +29,8 @@ import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from . import __version__, control
-from .channel import Channel
+from .boundary import ErrorCounts
+from .channel import Channel, Peer
 from .clock import Clock
 from .codec import Frame
 from .config import Config
@@ -33,13 +40,13 @@ from .services.ftp import FtpService
 from .services.signing import SigningService
 from .signing import SAVE_INTERVAL_S, SigningManager, SigningStore
 from .tlog import TlogWriter
-from .transport import run_channel
+from .transport import ChannelStartError, run_channel
 from .vehicles import vehicle_type
 
 log = structlog.get_logger("gcsd.gcs")
 
 STATS_INTERVAL_S = 10.0
-PEER_SWEEP_INTERVAL_S = 1.0
+SIM_TICK_S = 0.04  # the simulation task's period when no node asks for less (SIM_RATE_HZ 25)
 IDLE_NODE_PASS_S = 0.5  # a node with nothing scheduled still gets a pass this often (its simulation steps)
 
 
@@ -47,6 +54,7 @@ class GCS:
     def __init__(self, config: Config, clock: Clock | None = None, backend=None) -> None:
         self.config = config
         self.clock = clock or Clock()
+        self.errors = ErrorCounts()
         now = self.clock.now
         self.channels = [Channel(i, c, now) for i, c in enumerate(config.channels)]
         self._wakeups = [asyncio.Event() for _ in self.channels]
@@ -58,7 +66,7 @@ class GCS:
         self._node_due = [[0.0] * config.vehicle.count for _ in self.channels]
         self.nodes = [
             VehicleNode(i, config, vtype, self.clock, self.channels, functools.partial(self._wake_node, i),
-                        backend=None if backend is None else backend(i))
+                        backend=None if backend is None else backend(i), errors=self.errors)
             for i in range(config.vehicle.count)
         ]
         for node in self.nodes:  # FTP root: ftp.root under the vehicle's state directory
@@ -84,10 +92,14 @@ class GCS:
         self.router = Router({(n.sysid, n.compid) for n in self.nodes}, [ch.policy for ch in self.channels])
         self.bad_crc_forwarded = 0
         for ch in self.channels:
+            ch.verify = functools.partial(self._verify, ch)
             ch.on_frame = self.on_frame
+            ch.on_reject = self._reject
             ch.on_bad_crc = self.on_bad_crc
             ch.on_peer_joined = self.on_peer_joined
-        self._last_sweep_s = 0.0
+            # a tcp-server connection is served before its first good frame unless signatures are
+            # required there (TCP cannot be spoofed: no amplification; see channel.py)
+            ch.serve_on_connect = not (config.signing.require and not ch.unsigned_ok)
 
     def wake(self, channel: Channel) -> None:
         self._wakeups[channel.index].set()
@@ -97,17 +109,22 @@ class GCS:
         self._wakeups[channel.index].set()
 
     # --- receive ---------------------------------------------------------------------------
-    def on_frame(self, channel: Channel, frame: Frame) -> None:
-        now = self.clock.now()
-        msgid = frame.msgid
-        if self.tlog is not None:
-            self.tlog.record(frame.raw, self.clock.wall())
+    def _verify(self, channel: Channel, frame: Frame) -> str | None:
+        """The signing check, before anything else looks at the frame: None (accepted) or why not."""
         signing = self.signing
-        if signing.checks_needed:
-            reason = signing.check(frame.raw, msgid, frame.sysid, frame.compid, channel.unsigned_ok)
-            if reason is not None:
-                self._reject(channel, frame, reason, now)
-                return
+        if not signing.checks_needed:
+            return None
+        return signing.check(frame.raw, frame.msgid, frame.sysid, frame.compid, channel.unsigned_ok,
+                             self.clock.wall())
+
+    def on_frame(self, channel: Channel, frame: Frame, now: float) -> None:
+        try:
+            self._route(channel, frame, now)
+        except Exception:
+            self.errors.failed("receive", now, channel=channel.name, msg=frame.name, sysid=frame.sysid)
+
+    def _route(self, channel: Channel, frame: Frame, now: float) -> None:
+        msgid = frame.msgid
         if msgid != MSG_ID_RADIO_STATUS and msgid != MSG_ID_RADIO and channel.index not in self.active:
             channel.active = True
             self.active.add(channel.index)
@@ -145,8 +162,9 @@ class GCS:
             for node in self.nodes:
                 node.send_text(M.MAV_SEVERITY_WARNING, f"Signing: rejected packet ({reason})", channels={channel.index})
 
-    def on_peer_joined(self, channel: Channel) -> None:
+    def on_peer_joined(self, channel: Channel, peer: Peer) -> None:
         """A new ground station hears from us at once instead of at the next 1 Hz slot."""
+        log.info("peer_joined", channel=channel.name, peer=_peer_name(peer.key))
         for node in self.nodes:
             node.link(channel).push(MSG_ID_HEARTBEAT)
 
@@ -157,15 +175,17 @@ class GCS:
 
     # --- send ------------------------------------------------------------------------------
     def send_pass(self, channel: Channel, now: float) -> float | None:
-        if channel.config.type == "udp-server" and now - self._last_sweep_s > PEER_SWEEP_INTERVAL_S:
-            self._last_sweep_s = now
-            for gone in channel.forget_silent_peers(now):
-                log.info("peer_forgotten", channel=channel.name, peer=f"{gone[0]}:{gone[1]}")
+        for gone in channel.sweep(now):
+            log.info("peer_forgotten", channel=channel.name, peer=_peer_name(gone))
         deadline = None
         due = self._node_due[channel.index]
         for index, node in enumerate(self.nodes):
             if due[index] <= now:
-                d = node.send_pass(channel, now)
+                try:
+                    d = node.send_pass(channel, now)
+                except Exception:
+                    self.errors.failed("send_pass", now, channel=channel.name, sysid=node.sysid)
+                    d = None
                 due[index] = d if d is not None else now + IDLE_NODE_PASS_S
             if deadline is None or due[index] < deadline:
                 deadline = due[index]
@@ -195,11 +215,19 @@ class GCS:
                 self.tlog.close()
 
     async def _serve(self, stop: asyncio.Event) -> None:
+        try:
+            await self._serve_tasks(stop)
+        except* ChannelStartError as group:
+            raise group.exceptions[0] from None
+
+    async def _serve_tasks(self, stop: asyncio.Event) -> None:
         async with asyncio.TaskGroup() as tg:
             tasks = [
-                tg.create_task(run_channel(ch, self.send_pass, self._wakeups[ch.index], self._opened), name=ch.name)
+                tg.create_task(run_channel(ch, self.send_pass, self._wakeups[ch.index], self._opened,
+                                           self.errors.failed), name=ch.name)
                 for ch in self.channels
             ]
+            tasks.append(tg.create_task(self._simulate(), name="simulation"))
             tasks.append(tg.create_task(self._log_stats(), name="stats"))
             tasks.append(tg.create_task(self._save_signing_timestamp(), name="signing"))
             await stop.wait()
@@ -213,6 +241,16 @@ class GCS:
             node.close()
         if self.signing.key is not None:
             self.signing_manager.save(clean=True)
+
+    async def _simulate(self) -> None:
+        """Every node's autopilot and simulation, links or no links (failsafes need it most when
+        the only link is down)."""
+        while True:
+            now = self.clock.now()
+            for node in self.nodes:
+                node.step(now)  # guarded inside
+            period = min((n.sim.period_s for n in self.nodes), default=SIM_TICK_S)
+            await asyncio.sleep(max(0.001, period - (self.clock.now() - now)))
 
     async def _save_signing_timestamp(self) -> None:
         while True:
@@ -266,4 +304,8 @@ class GCS:
             for n in self.nodes
         ]
         return {"version": __version__, "uptime_s": now - self.started_s, "channels": channels,
-                "routes": routes, "vehicles": vehicles}
+                "routes": routes, "vehicles": vehicles, "errors": self.errors.snapshot()}
+
+
+def _peer_name(key: object) -> str:
+    return f"{key[0]}:{key[1]}" if isinstance(key, tuple) and len(key) == 2 else str(key)

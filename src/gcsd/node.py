@@ -6,8 +6,11 @@ channel, the STATUSTEXT queue, and the dispatch tables built from its services: 
 
 Messages from other systems are accepted unless `gcs.enforce_sysid` is set, in which case only
 our own sysid and the GCS sysid get through (RADIO_STATUS always does), as MAV_OPTIONS bit 0.
-An exception in a handler is logged with its traceback and counted; the channel and the daemon
-keep running.
+Every part runs inside an error boundary (boundary.py): a handler, each telemetry producer, the
+STATUSTEXT queue, each service's timer (`pending`) and the autopilot/simulation step (`step`, run
+by the GCS's simulation task, independent of the links). An exception is counted under the
+part's name and logged with its traceback (rate-limited); that part is skipped this turn and
+everything else carries on.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from .autopilot.attach import attach_services, initial_state
 from .autopilot.core import Autopilot
+from .boundary import ErrorCounts
 from .channel import MAX_FRAME_BYTES, Channel
 from .clock import Clock
 from .codec import Frame
@@ -54,6 +58,7 @@ class VehicleNode:
         channels: list[Channel],
         wake: Callable[[Channel], None],
         backend=None,
+        errors: ErrorCounts | None = None,
     ) -> None:
         vcfg = config.vehicle
         self.index = index
@@ -77,7 +82,8 @@ class VehicleNode:
         self.state = initial_state(vehicle, vcfg.home, index, float(self.params.get("BATT_CAPACITY")))
         self.sim = Autopilot(self, backend, now, vcfg.speedup)  # the vehicle: autopilot over a backend
         self.statustext = StatusTextQueue()
-        self.handler_errors = 0
+        self.errors = errors if errors is not None else ErrorCounts()
+        self._sim_component = "sim" if self.sim.simulated else "backend"
         self._wake = wake
         self.links = [Link(ch, now, self._producible, lambda ch=ch: wake(ch)) for ch in channels]
         self._wire_params(now)
@@ -183,8 +189,8 @@ class VehicleNode:
         try:
             handler(Incoming(frame.msg, frame, channel, now))
         except Exception:
-            self.handler_errors += 1
-            log.exception("handler_failed", channel=channel.name, msg=name, sysid=frame.sysid, compid=frame.compid)
+            self.errors.failed(f"handler:{name}", now, channel=channel.name, msg=name, sysid=frame.sysid,
+                               compid=frame.compid)
 
     # --- send ------------------------------------------------------------------------------
     def reply(self, channel: Channel, msg) -> bool:
@@ -216,22 +222,33 @@ class VehicleNode:
         """The vehicle type's pre-arm checks (gcsd.vehicles.prearm; ARMING_CHECK 0: none)."""
         return prearm_failures(self)
 
+    def step(self, now: float) -> None:
+        """Advance the autopilot and its simulation (or the embedding backend) to `now`."""
+        try:
+            self.sim.step(now)
+        except Exception:
+            self.errors.failed(self._sim_component, now, sysid=self.sysid)
+
     def send_pass(self, channel: Channel, now: float) -> float | None:
-        """Run this node's scheduler and text queue on one channel; returns the next deadline."""
-        self.sim.step(now)
+        """Run this node's scheduler, text queue and service timers on one channel; returns the
+        next deadline."""
         link = self.links[channel.index]
         sysid, compid = self.sysid, self.compid
+        errors = self.errors
 
         def send(msgid: int) -> bool:
             producer = PRODUCERS.get(msgid)
             if producer is None or not channel.peers:
                 return True  # nothing to say, or nobody to say it to: keep the schedule's phase
-            msg = producer(self, channel, now)
-            if msg is None:
-                return True
-            if not channel.has_room(msg.unpacker.size + 12):
-                return False
-            channel.send_message(msg, sysid, compid)
+            try:
+                msg = producer(self, channel, now)
+                if msg is None:
+                    return True
+                if not channel.has_room(msg.unpacker.size + 12):
+                    return False
+                channel.send_message(msg, sysid, compid)
+            except Exception:  # skipped this time; the slot keeps its phase
+                errors.failed(f"producer:{M.mavlink_map[msgid].msgname}", now, channel=channel.name, sysid=sysid)
             return True
 
         def send_text(msg) -> bool:
@@ -240,7 +257,7 @@ class VehicleNode:
             channel.send_message(msg, sysid, compid)
             return True
 
-        finished = link.scheduler.run(now, send) and self.statustext.drain(channel.index, now, send_text)
+        finished = link.scheduler.run(now, send) and self._drain_text(channel, now, send_text)
         if not finished:
             return now + max(channel.budget_wait_s(), 0.001)
         deadline = link.scheduler.next_deadline(now)
@@ -249,10 +266,21 @@ class VehicleNode:
             return channel.send_message(msg, sysid, compid)
 
         for service in self._senders:
-            d = service.pending(channel, now, send_msg)
+            try:
+                d = service.pending(channel, now, send_msg)
+            except Exception:
+                errors.failed(f"service:{type(service).__name__}", now, channel=channel.name, sysid=sysid)
+                continue
             if d is not None and (deadline is None or d < deadline):
                 deadline = d
         return deadline
+
+    def _drain_text(self, channel: Channel, now: float, send_text) -> bool:
+        try:
+            return self.statustext.drain(channel.index, now, send_text)
+        except Exception:
+            self.errors.failed("statustext", now, channel=channel.name, sysid=self.sysid)
+            return True
 
 
 def _vehicle_state_dir(config: Config, index: int) -> Path:

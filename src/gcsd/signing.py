@@ -10,7 +10,15 @@ Incoming, per frame (`check`):
   accepted only if its timestamp is at most 60 s behind our local timestamp; a known stream's
   timestamp must strictly increase. At most MAX_STREAMS streams are tracked; when full, the
   stream seen least recently is forgotten (ArduPilot refuses new streams instead, which locks
-  out a ground station that reconnects with a new link id).
+  out a ground station that reconnects with a new link id), and its last timestamp raises a
+  floor: a stream not in the table is accepted only above the floor, so forgetting a stream
+  never reopens its replays, however many streams come and go.
+- A timestamp more than FUTURE_LIMIT_S ahead of the local wall clock is refused (`future`) and
+  changes nothing: otherwise one validly signed frame from a ground station with a wrong clock
+  would raise our timestamp (and the saved one) and lock every other station out, across
+  restarts too. Five minutes covers ordinary clock skew between a ground station and a
+  companion computer. The check is skipped while the local wall clock is before
+  SANE_WALL_CLOCK_S (a board without a real-time clock that has not synced yet cannot judge).
 - Unsigned frame (MAVLink1 included): RADIO_STATUS and RADIO are always accepted; on a channel
   marked unsigned_ok it is accepted; otherwise it is refused when `require` is set, and accepted
   when it is not (SPEC.md: `require: false` is the permissive default).
@@ -43,6 +51,8 @@ WINDOW_UNITS = 60 * UNITS_PER_S
 MAX_STREAMS = 64
 SAVE_INTERVAL_S = 10.0
 SIG_LEN = 13  # link id 1 + timestamp 6 + signature 6
+FUTURE_LIMIT_S = 300.0
+SANE_WALL_CLOCK_S = 1735689600  # 2025-01-01: a wall clock before this is not set
 MSG_ID_RADIO_STATUS = 109
 MSG_ID_RADIO = 166
 
@@ -52,6 +62,7 @@ BAD_SIGNATURE = "bad_signature"
 REPLAY = "replay"
 STALE = "stale"
 NO_KEY = "no_key"
+FUTURE = "future"
 
 
 def wall_to_units(wall_s: float) -> int:
@@ -68,6 +79,7 @@ class Signing:
         self.timestamp = timestamp
         self.require = require
         self._streams: dict[tuple[int, int, int], int] = {}
+        self._floor = 0  # the highest timestamp of a forgotten stream
 
     @property
     def checks_needed(self) -> bool:
@@ -79,22 +91,25 @@ class Signing:
         self.key = None if key is None or key == bytes(32) else bytes(key)
         self.timestamp = max(self.timestamp, timestamp)
         self._streams.clear()
+        self._floor = 0
 
     def next_timestamp(self, wall_s: float) -> int:
         self.timestamp = max(self.timestamp + 1, wall_to_units(wall_s))
         return self.timestamp
 
-    def check(self, raw: bytes, msgid: int, sysid: int, compid: int, unsigned_ok: bool) -> str | None:
-        """None if the frame is accepted, else the reason it is refused."""
+    def check(self, raw: bytes, msgid: int, sysid: int, compid: int, unsigned_ok: bool,
+              wall_s: float = 0.0) -> str | None:
+        """None if the frame is accepted, else the reason it is refused. Only an accepted frame
+        changes state (the stream table and the local timestamp)."""
         signed = raw[0] == 0xFD and raw[2] & 0x01
         if not signed:
             if msgid == MSG_ID_RADIO_STATUS or msgid == MSG_ID_RADIO or unsigned_ok:
                 return None
             return UNSIGNED if self.require else None
-        reason = self._check_signed(raw, sysid, compid)
+        reason = self._check_signed(raw, sysid, compid, wall_s)
         return None if unsigned_ok else reason
 
-    def _check_signed(self, raw: bytes, sysid: int, compid: int) -> str | None:
+    def _check_signed(self, raw: bytes, sysid: int, compid: int, wall_s: float) -> str | None:
         key = self.key
         if key is None:
             return NO_KEY if self.require else None
@@ -102,14 +117,18 @@ class Signing:
             return BAD_SIGNATURE
         link_id = raw[-SIG_LEN]
         ts = int.from_bytes(raw[-12:-6], "little")
+        if wall_s >= SANE_WALL_CLOCK_S and ts > wall_to_units(wall_s + FUTURE_LIMIT_S):
+            return FUTURE
         stream = (sysid, compid, link_id)
         last = self._streams.get(stream)
         if last is None:
+            if ts <= self._floor:
+                return REPLAY  # older than a stream we had to forget: it may be one of its frames
             if ts + WINDOW_UNITS < self.timestamp:
                 return STALE
             if len(self._streams) >= MAX_STREAMS:
                 oldest = min(self._streams, key=self._streams.get)
-                del self._streams[oldest]
+                self._floor = max(self._floor, self._streams.pop(oldest))
         elif ts <= last:
             return REPLAY
         self._streams[stream] = ts

@@ -9,10 +9,16 @@ callbacks, which hand bytes to `Channel.receive`.
 Errors are events, never crashes: a refused connection, a vanished serial device or a full
 socket buffer is logged and counted; the channel reconnects, and the daemon keeps running.
 
-- udp-server: one bound socket; every address that sends is a peer, answered until silent 30 s.
+- udp-server: one bound socket; an address that sends a good frame becomes a peer (see
+  channel.py, "Admission"), answered until silent 30 s.
 - udp-client: one connected socket; the remote is the peer from the start.
-- tcp-server: every accepted connection is a peer.
+- tcp-server: every accepted connection is a peer (served at once, or after its first good
+  frame when the channel needs signatures).
 - tcp-client, serial: one peer while connected; reconnect after loss.
+
+A server channel (udp-server, tcp-server) that cannot open its address the first time is a
+startup failure (`ChannelStartError`, exit 1), never a daemon that sits there half-working;
+after it has been open once, it is reopened with backoff like the others.
 """
 
 from __future__ import annotations
@@ -33,6 +39,10 @@ WRITE_BUFFER_LIMIT = 64 * 1024
 UDP_RCVBUF = 4 * 1024 * 1024
 
 
+class ChannelStartError(Exception):
+    """A server channel could not open its address at start."""
+
+
 class _Datagram:
     """A non-blocking UDP socket read straight from the selector.
 
@@ -50,6 +60,7 @@ class _Datagram:
         self.loop = asyncio.get_running_loop()
         self.closed = self.loop.create_future()
         self.loop.add_reader(sock.fileno(), self._read_ready)
+        channel.make_writer = self.writer
 
     def writer(self, addr) -> Callable[[bytes], bool]:
         sendto = self.sock.sendto
@@ -67,6 +78,7 @@ class _Datagram:
         channel = self.channel
         recvfrom = self.sock.recvfrom
         peers = channel.peers
+        now = channel.clock()
         for _ in range(self.DRAIN_BATCH):
             try:
                 data, addr = recvfrom(65536)
@@ -79,9 +91,8 @@ class _Datagram:
             if peer is None:
                 if not self.accept_new_peers:
                     continue
-                peer = channel.add_peer(addr, self.writer(addr))
-                log.info("peer_joined", channel=channel.name, peer=f"{addr[0]}:{addr[1]}")
-            channel.receive(peer, data, datagram=True)
+                peer = channel.stranger(addr, now)
+            channel.receive(peer, data, now, datagram=True)
 
     def close(self) -> None:
         if self.sock.fileno() >= 0:
@@ -94,9 +105,10 @@ class _Datagram:
 class _Stream(asyncio.Protocol):
     """A TCP connection or a serial port: one peer."""
 
-    def __init__(self, channel: Channel, key: object | None = None) -> None:
+    def __init__(self, channel: Channel, key: object | None = None, server: bool = False) -> None:
         self.channel = channel
         self.key = key
+        self.server = server
         self.peer = None
         self.closed = asyncio.get_running_loop().create_future()
 
@@ -105,8 +117,11 @@ class _Stream(asyncio.Protocol):
         if self.key is None:
             addr = transport.get_extra_info("peername")
             self.key = addr if addr else id(self)
-        self.peer = self.channel.add_peer(self.key, self._write)
-        log.info("peer_joined", channel=self.channel.name, peer=str(self.key))
+        if self.server:
+            self.peer = self.channel.connect_peer(self.key, self._write, transport.close)
+        else:
+            self.peer = self.channel.add_peer(self.key, self._write)
+        log.info("peer_connected", channel=self.channel.name, peer=str(self.key))
 
     def _write(self, data: bytes) -> bool:
         transport = self.transport
@@ -116,7 +131,8 @@ class _Stream(asyncio.Protocol):
         return True
 
     def data_received(self, data: bytes) -> None:
-        self.channel.receive(self.peer, data)
+        channel = self.channel
+        channel.receive(self.peer, data, channel.clock())
 
     def connection_lost(self, exc) -> None:
         self.channel.remove_peer(self.key)
@@ -147,17 +163,18 @@ async def _open(channel: Channel):
         if not server:
             addr = (socket.gethostbyname(host), port)
             channel.add_peer(addr, proto.writer(addr))
+            log.info("peer_joined", channel=channel.name, peer=f"{addr[0]}:{addr[1]}")
         return proto.close, proto.closed
     if kind == "tcp-server":
         host, port = cfg.address
-        server = await loop.create_server(lambda: _Stream(channel), host, port, reuse_address=True)
+        server = await loop.create_server(lambda: _Stream(channel, server=True), host, port, reuse_address=True)
         channel.local_address = server.sockets[0].getsockname()[:2]
         closed = loop.create_future()
 
         def close():
             server.close()
-            for peer in list(channel.peers):
-                channel.remove_peer(peer)
+            for key in list(channel.peers) + list(channel._waiting):
+                channel.remove_peer(key)
             if not closed.done():
                 closed.set_result(None)
 
@@ -184,35 +201,52 @@ def _describe(channel: Channel) -> str:
     return channel.config.device or ""
 
 
+SERVER_TYPES = ("udp-server", "tcp-server")
+PASS_FAILED_PAUSE_S = 0.1
+
+
 async def run_channel(
     channel: Channel,
     send_pass: Callable[[Channel, float], float | None],
     wakeup: asyncio.Event,
     opened: Callable[[Channel], None] = lambda channel: None,
+    on_error: Callable[[str, float], None] | None = None,
 ) -> None:
-    """Open, serve and reopen one channel until cancelled."""
+    """Open, serve and reopen one channel until cancelled.
+
+    `send_pass` guards its own parts; should it raise all the same, `on_error(component, now)`
+    counts it and the loop goes on after a short pause (never a hot loop, never a dead channel).
+    """
     backoff = BACKOFF_START_S
     clock = channel.clock
+    ever_opened = False
     while True:
         try:
             close, closed = await _open(channel)
-        except (OSError, ValueError, ImportError) as exc:
-            log.warning("channel_open_failed", channel=channel.name, error=str(exc), retry_s=backoff)
+        except Exception as exc:  # OSError, serial.SerialException and friends
+            error = str(exc) if isinstance(exc, OSError) else repr(exc)
+            if not ever_opened and channel.config.type in SERVER_TYPES:
+                host, port = channel.config.address
+                raise ChannelStartError(
+                    f"channel {channel.name}: cannot open {channel.config.type} {host}:{port}: {error}") from None
+            log.warning("channel_open_failed", channel=channel.name, error=error, retry_s=backoff)
             await asyncio.sleep(backoff)
             backoff = min(backoff * 2, BACKOFF_MAX_S)
             continue
-        except Exception as exc:  # serial.SerialException and friends
-            log.warning("channel_open_failed", channel=channel.name, error=repr(exc), retry_s=backoff)
-            await asyncio.sleep(backoff)
-            backoff = min(backoff * 2, BACKOFF_MAX_S)
-            continue
+        ever_opened = True
         backoff = BACKOFF_START_S
         log.info("channel_opened", channel=channel.name, type=channel.config.type, address=_describe(channel))
         opened(channel)
         try:
             while not closed.done():
                 now = clock()
-                deadline = send_pass(channel, now)
+                try:
+                    deadline = send_pass(channel, now)
+                except Exception:
+                    if on_error is None:
+                        raise
+                    on_error(f"channel:{channel.name}", now)
+                    deadline = now + PASS_FAILED_PAUSE_S
                 timeout = 0.5 if deadline is None else max(0.0, min(deadline - clock(), 0.5))
                 if timeout > 0:
                     wakeup.clear()

@@ -59,14 +59,20 @@ def test_client_without_the_key_gets_nothing_accepted(daemon, client, tmp_path):
     assert stats["signature_rejects_unsigned"] >= 1 and stats["signature_rejects_bad_signature"] >= 1
 
 
-def test_rejections_are_explained_by_at_most_one_statustext_per_10_s(daemon, client, tmp_path):
+def test_rejections_are_explained_to_the_stations_served_by_at_most_one_statustext_per_10_s(daemon, client, tmp_path):
     d = signed_daemon(daemon, tmp_path)
-    c = client(udp_url(d.port("gcs")))
+    station = client(udp_url(d.port("gcs")))
+    sign(station, KEY)
+    assert arm_ack(station) is not None  # served: it has sent a good signed frame
+    stranger = client(udp_url(d.port("gcs")), 250, 190)
+    mark = station.mark()
     for _ in range(5):
-        c.heartbeat()
-    pump([c], 1.0)
-    texts = [r for r in c.received if r.type == "STATUSTEXT" and "Signing" in r.msg.text]
+        stranger.heartbeat()
+    pump([station, stranger], 2.5)
+    texts = [r for r in station.received[mark:] if r.type == "STATUSTEXT" and "Signing" in r.msg.text]
     assert len(texts) == 1 and "unsigned" in texts[0].msg.text
+    assert [r for r in station.received[mark:] if r.type == "HEARTBEAT"], "the station kept being served"
+    assert stranger.received == [], "a source of rejected frames gets nothing back (no amplification)"
 
 
 def test_mavlink1_is_refused_on_a_channel_that_requires_signing(daemon, client, tmp_path):

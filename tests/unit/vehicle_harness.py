@@ -93,6 +93,7 @@ class Harness:
         end = self.t + seconds
         while self.t < end:
             self.t = min(end, self.t + step)
+            self.node.step(self.t)  # the simulation task's tick
             self.node.send_pass(self.channel, self.t)
             if until is not None and until():
                 return True

@@ -248,7 +248,7 @@ class MissionService(Service):
 
     # --- plumbing ----------------------------------------------------------------------------
     def _origin(self, inc: Incoming) -> Origin:
-        return Origin(inc.frame.sysid, inc.frame.compid, inc.channel, inc.channel.mavlink1)
+        return Origin(inc.frame.sysid, inc.frame.compid, inc.channel, inc.frame.version == 1)
 
     def _transfer(self, inc: Incoming) -> MissionTransfer | None:
         t = self.transfers.get(inc.msg.mission_type)
