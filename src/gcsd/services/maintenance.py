@@ -1,10 +1,21 @@
 """Ground maintenance commands: calibration, storage, reboot, pre-arm checks, compass calibration.
 
-- PREFLIGHT_CALIBRATION: gyro (param1 1), barometer (param3 1), level (param5 2), simple
-  accelerometer (param5 4), airspeed (param6 2) run in the long-running slot: IN_PROGRESS at
-  once and every second, ACCEPTED when done, with ArduPilot's STATUSTEXT. Full accelerometer,
-  compass-motor, RC and temperature calibrations are interactive on ArduPilot: UNSUPPORTED.
-  Armed: TEMPORARILY_REJECTED.
+- PREFLIGHT_CALIBRATION (armed: TEMPORARILY_REJECTED):
+  - param5 1: the six-position accelerometer dialogue (`accelcal`): ACCEPTED at once, as
+    ArduPilot; the vehicle then asks for each position (COMMAND_LONG ACCELCAL_VEHICLE_POS and
+    "Place vehicle ... and press any key." STATUSTEXT); a ground station's COMMAND_ACK or
+    ACCELCAL_VEHICLE_POS answers it. All params 0 while it runs cancels it (QGroundControl's
+    Cancel): ACCEPTED.
+  - gyro (param1 1), barometer (param3 1), level (param5 2), simple accelerometer (param5 4),
+    airspeed (param6 2) run in the long-running slot: IN_PROGRESS at once and every second,
+    ACCEPTED when done (QGroundControl's Sensors page waits for that ACK), with ArduPilot's
+    STATUSTEXT; the result lands where ArduPilot keeps it: INS_GYROFFS_* (the simulated IMU's
+    SIM_GYRn_BIAS_*), BARO1_GND_PRESS (the simulated pressure at the current altitude),
+    AHRS_TRIM_X/Y (the vehicle's attitude now), INS_ACCOFFS_* / INS_ACCSCAL_* (SIM_ACCn_BIAS_*,
+    scales 1, trim 0).
+  - compass-motor (param6 1), RC (param4 1), temperature (param1 3) and ground pressure
+    (param2 1) need hardware that a simulation does not have: UNSUPPORTED.
+- ACCELCAL_VEHICLE_POS: ACCEPTED for the position the running dialogue asks for, else FAILED.
 - STORAGE_FORMAT (param1 1 and param2 1, else UNSUPPORTED): long-running; empties the FTP root
   (the vehicle's "SD card"); parameters and plans, which live beside it, stay.
 - PREFLIGHT_STORAGE: param1 0 read and 1 write are ACCEPTED (parameters are saved on every
@@ -15,10 +26,10 @@
   of gcsd. param1 0: nothing; 2 (shutdown) and the debug magics: UNSUPPORTED.
 - RUN_PREARM_CHECKS: each failure as "PreArm: ..." STATUSTEXT; ACCEPTED (TEMPORARILY_REJECTED
   armed).
-- DO_START_MAG_CAL, DO_ACCEPT_MAG_CAL, DO_CANCEL_MAG_CAL: a simulated compass calibration:
-  MAG_CAL_PROGRESS every second for MAG_CAL_S, then MAG_CAL_REPORT with the offsets found;
-  saved into COMPASS_OFS_X/Y/Z when accepted (or at once with autosave, param3 1).
-  FIXED_MAG_CAL_YAW saves them at once (disarmed).
+- DO_START_MAG_CAL, DO_ACCEPT_MAG_CAL, DO_CANCEL_MAG_CAL: a simulated onboard compass
+  calibration (`magcal`): MAG_CAL_PROGRESS and MAG_CAL_REPORT on the requester's channel,
+  results into COMPASS_OFS*/DIA*/ODI* when accepted, or at once with autosave (param3 1).
+  FIXED_MAG_CAL_YAW saves the offsets at once (disarmed).
 """
 
 from __future__ import annotations
@@ -30,9 +41,11 @@ from pathlib import Path
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from . import Service
+from . import Incoming, Service
+from .accelcal import FAILURE, AccelCal
 from .commands import CommandRequest
 from .longrunning import LongRunning
+from .magcal import MagCal, compass_params
 
 log = structlog.get_logger("gcsd.maintenance")
 
@@ -41,8 +54,6 @@ ACCEPTED, DENIED, FAILED, UNSUPPORTED, LATER = (
     M.MAV_RESULT_TEMPORARILY_REJECTED)
 CALIBRATION_S = 2.0
 FORMAT_S = 1.0
-MAG_CAL_S = 4.0
-SIMULATED_OFFSETS = (4.0, -9.0, 15.0)  # what a compass calibration finds on the simulated vehicle
 
 
 class MaintenanceService(Service):
@@ -52,7 +63,10 @@ class MaintenanceService(Service):
         self.node = node
         self.ftp_root = ftp_root
         self.slot = LongRunning()
-        self.mag_cal: dict | None = None
+        self.accel = AccelCal(node.params)
+        self.accel_requester: tuple | None = None  # ((sysid, compid), channel) of the accel dialogue
+        self.mag = MagCal(node.params)
+        self.mag_channel = None
 
     def commands(self):
         return {
@@ -60,7 +74,7 @@ class MaintenanceService(Service):
             M.MAV_CMD_PREFLIGHT_STORAGE: self.storage, M.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN: self.reboot,
             M.MAV_CMD_RUN_PREARM_CHECKS: self.run_prearm_checks, M.MAV_CMD_DO_START_MAG_CAL: self.start_mag_cal,
             M.MAV_CMD_DO_ACCEPT_MAG_CAL: self.accept_mag_cal, M.MAV_CMD_DO_CANCEL_MAG_CAL: self.cancel_mag_cal,
-            M.MAV_CMD_FIXED_MAG_CAL_YAW: self.fixed_mag_cal_yaw,
+            M.MAV_CMD_FIXED_MAG_CAL_YAW: self.fixed_mag_cal_yaw, M.MAV_CMD_ACCELCAL_VEHICLE_POS: self.accelcal_vehicle_pos,
         }
 
     # --- calibration -------------------------------------------------------------------------
@@ -68,28 +82,113 @@ class MaintenanceService(Service):
         if self.node.state.armed:
             return LATER
         p = [round(v) if math.isfinite(v) else 0 for v in (req.param1, req.param2, req.param3, req.param4, req.x, req.y)]
-        texts = []
+        if not any(p) and self.accel.running():  # QGroundControl's Cancel
+            self._send_asks(self.accel.cancel())
+            return ACCEPTED
+        if p[4] == 1:  # the six-position dialogue: ACCEPTED, then it runs by itself
+            if self.accel.running() or self.slot.job is not None:
+                return LATER
+            self.accel_requester = (req.inc.sender, req.inc.channel)
+            self.accel.start(req.inc.now, (self.node.state.roll_rad, self.node.state.pitch_rad))
+            self.node.wake(req.inc.channel)
+            return ACCEPTED
+        steps = []
         if p[0] == 1:
-            texts.append("Gyro calibration complete")
+            steps.append(self._gyro)
         if p[2] == 1:
-            texts.append("Barometer calibration complete")
+            steps.append(self._baro)
         if p[4] == 2:
-            texts.append("Trim OK: roll=0.00 pitch=0.00")
+            steps.append(self._level)
         if p[4] == 4:
-            texts.append("Accelerometer calibration complete")
+            steps.append(self._simple_accel)
         if p[5] == 2:
-            texts.append("Airspeed 1 calibrated")
-        interactive = p[0] == 3 or p[1] == 1 or p[3] == 1 or p[4] == 1 or p[5] == 1
-        if not texts or interactive:
+            steps.append(self._airspeed)
+        interactive = p[0] == 3 or p[1] == 1 or p[3] == 1 or p[5] == 1
+        if not steps or interactive:
             return UNSUPPORTED
+        if self.accel.running():
+            return LATER
         self.node.send_text(M.MAV_SEVERITY_INFO, "Calibrating sensors")
 
         def finish() -> int:
-            for text in texts:
-                self.node.send_text(M.MAV_SEVERITY_INFO, text)
+            for step in steps:
+                step()
+            self._save_params()
             return ACCEPTED
 
         return self._long(req, CALIBRATION_S, finish)
+
+    def _gyro(self) -> None:
+        for imu, prefix in ((1, "INS_GYR"), (2, "INS_GYR2")):
+            if imu == 2 and not self._param("INS_GYR2_ID", 0):
+                continue
+            for axis in "XYZ":
+                self._set(f"{prefix}OFFS_{axis}", self._param(f"SIM_GYR{imu}_BIAS_{axis}", 0.0))
+        self.node.send_text(M.MAV_SEVERITY_INFO, "Gyro calibration complete")
+
+    def _baro(self) -> None:
+        pressure_pa = _pressure_pa(self.node.state.alt_amsl_m)
+        for n in (1, 2, 3):
+            self._set(f"BARO{n}_GND_PRESS", pressure_pa)
+        self.node.send_text(M.MAV_SEVERITY_INFO, "Updating barometer calibration")
+
+    def _level(self) -> None:
+        roll, pitch = self.node.state.roll_rad, self.node.state.pitch_rad
+        self._set("AHRS_TRIM_X", roll)
+        self._set("AHRS_TRIM_Y", pitch)
+        self.node.send_text(M.MAV_SEVERITY_INFO, f"Trim OK: roll={math.degrees(roll):.2f} pitch={math.degrees(pitch):.2f}")
+
+    def _simple_accel(self) -> None:
+        """Offsets from one level sample, scales 1, trim 0 (ArduPilot's simple_accel_cal)."""
+        for imu, prefix in ((1, "INS_ACC"), (2, "INS_ACC2")):
+            if imu == 2 and not self._param("INS_ACC2_ID", 0):
+                continue
+            for axis in "XYZ":
+                self._set(f"{prefix}OFFS_{axis}", self._param(f"SIM_ACC{imu}_BIAS_{axis}", 0.0))
+                self._set(f"{prefix}SCAL_{axis}", 1.0)
+        self._set("AHRS_TRIM_X", 0.0)
+        self._set("AHRS_TRIM_Y", 0.0)
+        self.node.send_text(M.MAV_SEVERITY_INFO, "Accelerometer calibration complete")
+
+    def _airspeed(self) -> None:
+        self.node.send_text(M.MAV_SEVERITY_INFO, "Airspeed 1 calibrated")
+
+    def _param(self, name: str, default: float) -> float:
+        return float(self.node.params.get(name)) if name in self.node.params else default
+
+    def _set(self, name: str, value: float) -> None:
+        if name in self.node.params:
+            self.node.params.set(name, value, force=True)
+
+    def accelcal_vehicle_pos(self, req: CommandRequest) -> int:
+        result = self.accel.vehicle_pos(req.param1, req.inc.now)
+        self.node.wake(req.inc.channel)
+        return result
+
+    def handle_COMMAND_ACK(self, inc: Incoming) -> None:
+        """A ground station's COMMAND_ACK is the "press any key" of the accelerometer dialogue."""
+        requester = self.accel_requester
+        if requester and inc.sender == requester[0] and self.accel.key(inc.now):
+            self.node.wake(inc.channel)
+
+    def _send_asks(self, asks) -> None:
+        if not asks or self.accel_requester is None:
+            return
+        (sysid, compid), channel = self.accel_requester
+        for ask in asks:
+            self.node.reply(channel, M.MAVLink_command_long_message(
+                sysid, compid, M.MAV_CMD_ACCELCAL_VEHICLE_POS, 0, float(ask.position), 0, 0, 0, 0, 0, 0))
+            if ask.text:
+                severity = M.MAV_SEVERITY_INFO if ask.position != FAILURE else M.MAV_SEVERITY_CRITICAL
+                self.node.send_text(severity, ask.text)
+        if not self.accel.running():
+            self._save_params()
+
+    def _save_params(self) -> None:
+        try:
+            self.node.param_service.save()
+        except OSError as exc:
+            log.error("params_save_failed", error=str(exc))
 
     def storage_format(self, req: CommandRequest) -> int:
         if req.param1 != 1 or req.param2 != 1:
@@ -165,68 +264,58 @@ class MaintenanceService(Service):
     # --- compass calibration -----------------------------------------------------------------
     def start_mag_cal(self, req: CommandRequest) -> int:
         if self.node.state.armed:
-            return LATER
-        if "COMPASS_OFS_X" not in self.node.params:
+            self.node.send_text(M.MAV_SEVERITY_NOTICE, "Disarm to allow compass calibration")
+            return FAILED
+        if not self.mag.compasses():
             return UNSUPPORTED
-        self.mag_cal = {"started": req.inc.now, "autosave": req.param3 >= 1, "next": req.inc.now,
-                        "done": False, "channel": req.inc.channel}
-        self.node.wake(req.inc.channel)
-        return ACCEPTED
+        delay = req.param4 if math.isfinite(req.param4) else 0.0
+        result = self.mag.start(req.param1 if math.isfinite(req.param1) else -1, req.param3 != 0, delay, req.inc.now)
+        if result == ACCEPTED:
+            self.mag_channel = req.inc.channel
+            self.node.wake(req.inc.channel)
+        return result
 
     def accept_mag_cal(self, req: CommandRequest) -> int:
-        cal = self.mag_cal
-        if cal is None or not cal["done"]:
-            return FAILED
-        self._save_offsets()
-        self.mag_cal = None
-        return ACCEPTED
+        result = self.mag.accept(req.param1 if math.isfinite(req.param1) else -1)
+        if self.mag.saved_any:
+            self.mag.saved_any = False
+            self._save_params()
+        return result
 
     def cancel_mag_cal(self, req: CommandRequest) -> int:
-        self.mag_cal = None
-        return ACCEPTED
+        return self.mag.cancel()
 
     def fixed_mag_cal_yaw(self, req: CommandRequest) -> int:
-        """FIXED_MAG_CAL_YAW: calibrate from a known heading at once (the vehicle must be still)."""
-        if self.node.state.armed or "COMPASS_OFS_X" not in self.node.params:
+        """FIXED_MAG_CAL_YAW: calibrate from a known heading at once (the vehicle must be still):
+        every compass in use gets the simulated magnetometer's offsets."""
+        compasses = self.mag.compasses()
+        if self.node.state.armed or not compasses:
             return FAILED
-        self._save_offsets()
+        for index in compasses:
+            offsets, _diag, _offdiag = self.mag._simulated_error(index)
+            for name, value in zip(compass_params(index, "OFS"), offsets):
+                self._set(name, value)
+        self._save_params()
         self.node.send_text(M.MAV_SEVERITY_INFO, f"Mag cal from yaw {req.param1:.0f}: offsets saved")
         return ACCEPTED
-
-    def _save_offsets(self) -> None:
-        for axis, value in zip("XYZ", SIMULATED_OFFSETS):
-            self.node.params.set(f"COMPASS_OFS_{axis}", value, force=True)
-        try:
-            self.node.param_service.save()
-        except OSError as exc:
-            log.error("params_save_failed", error=str(exc))
-
-    def _mag_cal_messages(self, now: float) -> list:
-        cal = self.mag_cal
-        if cal is None or cal["done"] or now < cal["next"]:
-            return []
-        pct = min(100, int(100 * (now - cal["started"]) / MAG_CAL_S))
-        if pct < 100:
-            cal["next"] = now + 1.0
-            return [M.MAVLink_mag_cal_progress_message(0, 1, 1, M.MAG_CAL_RUNNING_STEP_TWO, 1, pct, [0] * 10,
-                                                       0.0, 0.0, 1.0)]
-        cal["done"] = True
-        if cal["autosave"]:
-            self._save_offsets()
-            self.mag_cal = None
-        x, y, z = SIMULATED_OFFSETS
-        return [M.MAVLink_mag_cal_report_message(0, 1, 1, M.MAG_CAL_SUCCESS, int(cal["autosave"]), 4.5, x, y, z,
-                                                 1.0, 1.0, 1.0, 0.0, 0.0, 0.0)]
 
     # --- the send pass -----------------------------------------------------------------------
     def pending(self, channel, now: float, send) -> float | None:
         for ack in self.slot.due(channel, now):
             send(ack)
-        cal = self.mag_cal
-        if cal is not None and cal["channel"] is channel:
-            for msg in self._mag_cal_messages(now):
+        if self.accel_requester is not None and self.accel_requester[1] is channel:
+            self._send_asks(self.accel.poll(now))
+        if self.mag_channel is channel:
+            for msg in self.mag.messages(now):
                 send(msg)
-        deadlines = [d for d in (self.slot.next_deadline(),
-                                 None if self.mag_cal is None or self.mag_cal["done"] else self.mag_cal["next"])
+            if self.mag.saved_any:
+                self.mag.saved_any = False
+                self._save_params()
+        deadlines = [d for d in (self.slot.next_deadline(), self.accel.next_deadline(), self.mag.next_deadline())
                      if d is not None]
         return min(deadlines) if deadlines else None
+
+
+def _pressure_pa(alt_amsl_m: float) -> float:
+    """The simulated barometer's pressure (the standard atmosphere, as SCALED_PRESSURE)."""
+    return 101325.0 * (1 - 2.25577e-5 * alt_amsl_m) ** 5.25588

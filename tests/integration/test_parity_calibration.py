@@ -1,0 +1,145 @@
+"""The calibration dialogues as QGroundControl's Sensors page drives them (APMSensorsComponentController),
+against the real daemon over UDP with pymavlink: each result lands in ArduPilot's parameter names.
+
+- Compass: DO_CANCEL_MAG_CAL (QGC's probe for onboard calibration) -> DO_START_MAG_CAL(mask, 0, autosave 1)
+  -> MAG_CAL_PROGRESS ... -> MAG_CAL_REPORT per compass -> COMPASS_OFS* read back.
+- Accelerometer: PREFLIGHT_CALIBRATION param5 1 -> ACCELCAL_VEHICLE_POS 1..6 from the vehicle, each
+  answered by a COMMAND_ACK (QGC's Next button) -> ACCELCAL_VEHICLE_POS_SUCCESS.
+- Level (param5 2), simple accelerometer (param5 4), barometer (param3 1): IN_PROGRESS, then ACCEPTED.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from .helpers import M, is_ack, wait_for
+
+UDP = {"channels": [{"name": "gcs", "type": "udp-server", "address": "127.0.0.1:0"}]}
+
+
+@pytest.fixture
+def gcs(daemon, client):
+    d = daemon(UDP)
+    c = client(f"udpout:127.0.0.1:{d.port('gcs')}")
+    c.heartbeat()
+    assert wait_for(c, lambda r: r.type == "HEARTBEAT" and r.src == (1, 1), 3.0)
+    return c
+
+
+def _ack(gcs, command: int, *params: float, timeout: float = 3.0):
+    mark = gcs.mark()
+    gcs.command_long(command, *params)
+    r = wait_for(gcs, is_ack(command), timeout, since=mark)
+    assert r is not None, f"no COMMAND_ACK for {command}"
+    return r.msg.result
+
+
+def _param(gcs, name: str):
+    mark = gcs.mark()
+    gcs.send(M.MAVLink_param_request_read_message(1, 1, name.encode(), -1))
+    r = wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and r.msg.param_id == name, 3.0, since=mark)
+    return None if r is None else r.msg.param_value
+
+
+def _texts(gcs, since: int) -> list[str]:
+    return [r.msg.text for r in gcs.since(since, "STATUSTEXT")]
+
+
+def test_compass_calibration_as_qgroundcontrol_runs_it_saves_offsets_and_the_daemon_lives(gcs):
+    before = _param(gcs, "COMPASS_OFS_X")
+    assert before is not None
+    assert _ack(gcs, M.MAV_CMD_DO_CANCEL_MAG_CAL) == M.MAV_RESULT_ACCEPTED  # "onboard cal supported"
+    mark = gcs.mark()
+    assert _ack(gcs, M.MAV_CMD_DO_START_MAG_CAL, 0, 0, 1, 0, 0) == M.MAV_RESULT_ACCEPTED
+    report = wait_for(gcs, lambda r: r.type == "MAG_CAL_REPORT", 10.0, since=mark)
+    assert report is not None, "no MAG_CAL_REPORT"
+    progress = gcs.since(mark, "MAG_CAL_PROGRESS")
+    assert progress, "no MAG_CAL_PROGRESS before the report"
+    pcts = [r.msg.completion_pct for r in progress if r.msg.compass_id == 0]
+    assert pcts == sorted(pcts) and pcts[-1] < 100
+    assert {r.msg.cal_status for r in progress} <= {M.MAG_CAL_RUNNING_STEP_ONE, M.MAG_CAL_RUNNING_STEP_TWO}
+    assert progress[0].msg.cal_mask & 1 and progress[0].msg.attempt == 1
+    rep = report.msg
+    assert (rep.cal_status, rep.autosaved) == (M.MAG_CAL_SUCCESS, 1)
+    assert 0 < rep.fitness < 16.0  # below COMPASS_CAL_FIT's default: QGroundControl calls it a success
+    saved = [_param(gcs, f"COMPASS_OFS_{a}") for a in "XYZ"]
+    assert saved == pytest.approx([rep.ofs_x, rep.ofs_y, rep.ofs_z])
+    assert (rep.diag_x, rep.diag_y, rep.diag_z) != (0.0, 0.0, 0.0)
+    # the daemon is alive and still answers commands after the whole dialogue
+    assert _ack(gcs, M.MAV_CMD_DO_ACCEPT_MAG_CAL) == M.MAV_RESULT_ACCEPTED
+
+
+def test_compass_calibration_without_autosave_waits_for_accept(gcs):
+    before = [_param(gcs, f"COMPASS_OFS_{a}") for a in "XYZ"]
+    gcs.send(M.MAVLink_param_set_message(1, 1, b"COMPASS_OFS_X", 0.0, M.MAV_PARAM_TYPE_REAL32))
+    assert wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and r.msg.param_id == "COMPASS_OFS_X", 3.0)
+    mark = gcs.mark()
+    assert _ack(gcs, M.MAV_CMD_DO_START_MAG_CAL, 1, 0, 0) == M.MAV_RESULT_ACCEPTED
+    assert _ack(gcs, M.MAV_CMD_DO_ACCEPT_MAG_CAL) == M.MAV_RESULT_FAILED  # still running
+    report = wait_for(gcs, lambda r: r.type == "MAG_CAL_REPORT", 10.0, since=mark)
+    assert report is not None and report.msg.autosaved == 0
+    assert _param(gcs, "COMPASS_OFS_X") == 0.0  # not saved yet
+    assert _ack(gcs, M.MAV_CMD_DO_ACCEPT_MAG_CAL) == M.MAV_RESULT_ACCEPTED
+    assert _param(gcs, "COMPASS_OFS_X") == pytest.approx(report.msg.ofs_x)
+    assert report.msg.ofs_x != 0.0 and before[1] is not None
+
+
+def test_compass_calibration_is_refused_while_armed(gcs):
+    assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM, 1, 21196) == M.MAV_RESULT_ACCEPTED
+    mark = gcs.mark()
+    assert _ack(gcs, M.MAV_CMD_DO_START_MAG_CAL, 0, 0, 1) == M.MAV_RESULT_FAILED
+    assert wait_for(gcs, lambda r: r.type == "STATUSTEXT" and "Disarm" in r.msg.text, 3.0, since=mark)
+
+
+def test_accelerometer_calibration_six_positions_answered_like_qgroundcontrol(gcs):
+    mark = gcs.mark()
+    assert _ack(gcs, M.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 0, 1) == M.MAV_RESULT_ACCEPTED
+    asked = []
+    for position in range(1, 7):
+        r = wait_for(gcs, lambda r, p=position: r.type == "COMMAND_LONG"
+                     and r.msg.command == M.MAV_CMD_ACCELCAL_VEHICLE_POS and r.msg.param1 == p, 5.0, since=mark)
+        assert r is not None, f"the vehicle never asked for position {position}"
+        assert (r.msg.target_system, r.msg.target_component) == (255, 190)
+        asked.append(position)
+        mark = gcs.mark()
+        gcs.send(M.MAVLink_command_ack_message(0, 1, 0, 0, 0, 0))  # QGroundControl's "Next"
+    done = wait_for(gcs, lambda r: r.type == "COMMAND_LONG" and r.msg.command == M.MAV_CMD_ACCELCAL_VEHICLE_POS
+                    and r.msg.param1 == M.ACCELCAL_VEHICLE_POS_SUCCESS, 5.0, since=mark)
+    assert done is not None
+    assert asked == [1, 2, 3, 4, 5, 6]
+    assert wait_for(gcs, lambda r: r.type == "STATUSTEXT" and r.msg.text == "Calibration successful", 3.0)
+    texts = _texts(gcs, 0)
+    assert "Place vehicle level and press any key." in texts
+    assert "Place vehicle on its BACK and press any key." in texts
+    assert "Calibration successful" in texts
+
+
+def test_accelcal_vehicle_pos_from_the_ground_station_must_match_the_position_asked(gcs):
+    assert _ack(gcs, M.MAV_CMD_ACCELCAL_VEHICLE_POS, 1) == M.MAV_RESULT_FAILED  # nothing running
+    mark = gcs.mark()
+    assert _ack(gcs, M.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 0, 1) == M.MAV_RESULT_ACCEPTED
+    assert wait_for(gcs, lambda r: r.type == "COMMAND_LONG" and r.msg.param1 == 1, 5.0, since=mark)
+    assert _ack(gcs, M.MAV_CMD_ACCELCAL_VEHICLE_POS, 2) == M.MAV_RESULT_FAILED  # level is wanted
+    assert _ack(gcs, M.MAV_CMD_ACCELCAL_VEHICLE_POS, 1) == M.MAV_RESULT_ACCEPTED  # MAVProxy's way
+    assert wait_for(gcs, lambda r: r.type == "COMMAND_LONG" and r.msg.param1 == 2, 5.0, since=mark)
+    # QGroundControl's Cancel: PREFLIGHT_CALIBRATION with all zeros ends the dialogue as failed
+    mark = gcs.mark()
+    assert _ack(gcs, M.MAV_CMD_PREFLIGHT_CALIBRATION) == M.MAV_RESULT_ACCEPTED
+    assert wait_for(gcs, lambda r: r.type == "COMMAND_LONG"
+                    and r.msg.param1 == M.ACCELCAL_VEHICLE_POS_FAILED, 3.0, since=mark)
+
+
+@pytest.mark.parametrize("params, text", [
+    ((0, 0, 0, 0, 2), "Trim OK"),
+    ((0, 0, 0, 0, 4), "Accelerometer calibration complete"),
+    ((0, 0, 1, 0, 0), "Updating barometer calibration"),
+])
+def test_one_shot_calibrations_report_in_progress_then_accepted(gcs, params, text):
+    mark = gcs.mark()
+    gcs.command_long(M.MAV_CMD_PREFLIGHT_CALIBRATION, *params)
+    first = wait_for(gcs, is_ack(M.MAV_CMD_PREFLIGHT_CALIBRATION), 3.0, since=mark)
+    assert first is not None and first.msg.result == M.MAV_RESULT_IN_PROGRESS
+    final = wait_for(gcs, lambda r: is_ack(M.MAV_CMD_PREFLIGHT_CALIBRATION)(r)
+                     and r.msg.result == M.MAV_RESULT_ACCEPTED, 6.0, since=mark)
+    assert final is not None
+    assert wait_for(gcs, lambda r: r.type == "STATUSTEXT" and text in r.msg.text, 3.0, since=mark)
