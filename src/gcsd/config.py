@@ -26,12 +26,14 @@ from types import MappingProxyType
 import yaml
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
+from .config_mqtt import MQTT_KEYS, MqttConfig, read_mqtt
+
 STREAM_NAMES = ("raw_sens", "ext_stat", "rc_chan", "raw_ctrl", "position",
                 "extra1", "extra2", "extra3", "params", "adsb")
 DEFAULT_STREAM_RATES_HZ = {"raw_sens": 2, "ext_stat": 2, "rc_chan": 5, "raw_ctrl": 0, "position": 2,
                            "extra1": 5, "extra2": 5, "extra3": 2, "params": 10, "adsb": 0}
 VEHICLE_TYPES = ("copter", "plane", "rover", "sub", "tracker", "blimp", "companion")
-CHANNEL_TYPES = ("udp-server", "udp-client", "tcp-server", "tcp-client", "serial")
+CHANNEL_TYPES = ("udp-server", "udp-client", "tcp-server", "tcp-client", "serial", "mqtt")
 CHANNEL_OPTIONS = ("no_forward", "no_stream_override", "unsigned_ok", "forward_bad_crc", "high_latency")
 LOG_LEVELS = ("debug", "info", "warning", "error")
 LOG_FORMATS = ("console", "json")
@@ -106,6 +108,7 @@ class ChannelConfig:
     options: frozenset[str] = frozenset()
     private: bool = False
     bandwidth: int | None = None  # bytes/s; None is unlimited, except serial: it resolves to baud // 10
+    mqtt: MqttConfig | None = None  # type mqtt: broker, topic, role, ... (config_mqtt.py)
 
     def __post_init__(self) -> None:
         # Any mapping given is merged over the defaults and frozen, so streams always has all ten.
@@ -194,8 +197,8 @@ SERIAL_CONTROL_PORTS = ("telem1", "telem2", "gps1", "gps2", *(f"serial{n}" for n
 _VEHICLE_KEYS = ("type", "sysid", "compid", "count", "home", "speedup")
 _MISSION_KEYS = ("max_items", "max_fence", "max_rally", "retry_ms")
 _CHANNEL_KEYS = ("name", "type", "address", "device", "baud", "mavlink", "streams", "options",
-                 "private", "bandwidth")
-_NETWORK_TYPES = tuple(t for t in CHANNEL_TYPES if t != "serial")
+                 "private", "bandwidth", *MQTT_KEYS)
+_NETWORK_TYPES = tuple(t for t in CHANNEL_TYPES if t not in ("serial", "mqtt"))
 _SIGNING_KEY = re.compile(f"[0-9a-fA-F]{{{SIGNING_KEY_HEX_CHARS}}}")
 _ADDRESS = re.compile(r"(?:\[(?P<ipv6>[^\]]+)\]|(?P<host>[^:\s\[\]]+)):(?P<port>[0-9]{1,5})", re.ASCII)
 
@@ -336,6 +339,7 @@ def _channel(r: _Reader, c: _Section) -> ChannelConfig:
         options=frozenset(r.choice(o, "", CHANNEL_OPTIONS) for o in r.sequence(c["options"])) - {""},
         private=r.boolean(c["private"], False),
         bandwidth=r.integer(c["bandwidth"], None, 1, nullable=True),
+        mqtt=read_mqtt(r, c, channel_type),
     )
 
 

@@ -34,8 +34,9 @@ from .channel import Channel, Peer
 from .clock import Clock
 from .codec import Frame
 from .config import Config
+from .config_mqtt import route_capacity
 from .node import VehicleNode
-from .router import MSG_ID_HEARTBEAT, MSG_ID_RADIO, MSG_ID_RADIO_STATUS, Router
+from .router import MAX_ROUTES, MSG_ID_HEARTBEAT, MSG_ID_RADIO, MSG_ID_RADIO_STATUS, Router, RouteTable
 from .services.ftp import FtpService
 from .services.signing import SigningService
 from .signing import SAVE_INTERVAL_S, SigningManager, SigningStore
@@ -89,7 +90,8 @@ class GCS:
         self.started_s = self.clock.now()
         self._rates: dict[str, tuple[float, float]] = {}
         self._by_sysid = {n.sysid: n for n in self.nodes}
-        self.router = Router({(n.sysid, n.compid) for n in self.nodes}, [ch.policy for ch in self.channels])
+        self.router = Router({(n.sysid, n.compid) for n in self.nodes}, [ch.policy for ch in self.channels],
+                             RouteTable(route_capacity((c.type for c in config.channels), MAX_ROUTES)))
         self.bad_crc_forwarded = 0
         for ch in self.channels:
             ch.verify = functools.partial(self._verify, ch)
