@@ -192,6 +192,10 @@ async def _open(channel: Channel):
             loop, lambda: _Stream(channel, key=cfg.device), cfg.device, baudrate=cfg.baud
         )
         return transport.close, proto.closed
+    if kind == "mqtt":
+        from . import mqtt  # paho-mqtt is imported only by daemons that use a broker
+
+        return await mqtt.open_channel(channel)
     raise ValueError(f"unknown channel type {kind!r}")
 
 
