@@ -34,3 +34,34 @@ def comparison_table(peer: str, rows: Iterable[Row], notes: Iterable[str] = ()) 
         return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
 
     return "\n".join([line(head), "  ".join("-" * w for w in widths), *map(line, body), "", *notes])
+
+
+# A row of the routing table: (metric, {router: value}, "hi" | "lo" | None,
+# target text, check({router: value}) -> bool | None for gcsd's "meets" column).
+RouterRow = tuple[str, dict[str, float | None], str | None, str, Callable[[dict], bool | None] | None]
+
+
+def routers_table(labels: dict[str, str], rows: Iterable[RouterRow]) -> str:
+    """One column per router in `labels` (name -> column title; gcsd first), then gcsd/<router> for
+    every other router, SPEC's target and whether gcsd meets it. Rows with no value are left out."""
+    others = [r for r in labels if r != "gcsd"]
+    head = ("metric", *labels.values(), *(f"gcsd/{labels[r]}" for r in others), "SPEC target", "gcsd meets")
+    body = []
+    for name, vals, better, target, ok in rows:
+        if all(vals.get(r) is None for r in labels):
+            continue
+        gv = vals.get("gcsd")
+        ratios = []
+        for r in others:
+            rv = vals.get(r)
+            ratios.append("n/a" if gv is None or rv in (None, 0) else
+                          f"{gv / rv:.2f}" + {"hi": " (higher better)", "lo": " (lower better)"}.get(better, ""))
+        verdict = None if ok is None or gv is None else ok(vals)
+        meets = "" if verdict is None else ("yes" if verdict else "NO")
+        body.append((name, *(fmt(vals.get(r)) for r in labels), *ratios, target, meets))
+    widths = [max(len(r[i]) for r in (head, *body)) for i in range(len(head))]
+
+    def line(r):
+        return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
+
+    return "\n".join([line(head), "  ".join("-" * w for w in widths), *map(line, body)])

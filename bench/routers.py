@@ -1,6 +1,11 @@
-"""Launching the routers under test (gcsd, MAVProxy), free ports, and /proc sampling.
+"""Launching the routers under test (gcsd, mavlink-router, MAVProxy), free ports, and /proc sampling.
 
 gcsd runs as ``[sys.executable, "-m", "gcsd", "run", "-c", CFG]`` (optionally under cProfile);
+mavlink-router (C++, built from source: bench/README.md) as ``mavlink-routerd -c CONF`` with two
+UDP endpoints in server mode, the equivalent of gcsd's two ``udp-server`` channels (each answers
+the address it last heard from; a targeted frame goes where its target system was seen), TCP
+server off, log level warning; the binary is ``$GCSD_MAVLINK_ROUTER`` or ``mavlink-routerd`` on
+PATH, and the bench skips it with a note when there is neither.
 MAVProxy as a pure forwarder: ``mavproxy.py --master=udpin:A --out=udpout:B --non-interactive
 --no-state --default-modules= --streamrate=-1`` (it forwards master -> every --out and --out ->
 master; only the ``link`` module is loaded; it sends its own 1 Hz HEARTBEAT as sysid 255).
@@ -216,3 +221,41 @@ def start_mavproxy(workdir: Path, port_a: int, port_b: int) -> Launched:
             f"--out=udpout:127.0.0.1:{port_b}", "--non-interactive", "--no-state",
             "--default-modules=", "--streamrate=-1"]
     return _launch("mavproxy", argv, workdir)
+
+
+MAVLINK_ROUTER_ENV = "GCSD_MAVLINK_ROUTER"
+
+
+def mavlink_router_binary() -> tuple[str | None, str]:
+    """(path of mavlink-routerd, how it was found) or (None, why not)."""
+    path = os.environ.get(MAVLINK_ROUTER_ENV)
+    if path:
+        if os.access(path, os.X_OK):
+            return path, f"${MAVLINK_ROUTER_ENV}={path}"
+        return None, f"${MAVLINK_ROUTER_ENV}={path} is not an executable file"
+    found = shutil.which("mavlink-routerd")
+    if found:
+        return found, f"{found} (PATH)"
+    return None, f"mavlink-routerd not found: set {MAVLINK_ROUTER_ENV} (build steps in bench/README.md)"
+
+
+def mavlink_router_version(binary: str) -> str:
+    try:
+        out = subprocess.run([binary, "--version"], capture_output=True, text=True, timeout=10, check=False)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return str(exc)
+    return (out.stdout + out.stderr).strip().splitlines()[0] if (out.stdout + out.stderr).strip() else "?"
+
+
+def routing_mavlink_router_config(workdir: Path, port_a: int, port_b: int) -> Path:
+    cfg = workdir / f"mavlink-router-{len(list(workdir.glob('mavlink-router-*.conf')))}.conf"
+    cfg.write_text("\n".join([
+        "[General]", "TcpServerPort = 0", "ReportStats = false", "DebugLogLevel = warning", "",
+        "[UdpEndpoint a]", "Mode = Server", "Address = 127.0.0.1", f"Port = {port_a}", "",
+        "[UdpEndpoint b]", "Mode = Server", "Address = 127.0.0.1", f"Port = {port_b}", "",
+    ]))
+    return cfg
+
+
+def start_mavlink_router(workdir: Path, binary: str, cfg: Path) -> Launched:
+    return _launch("mavlink-router", [binary, "-c", str(cfg)], workdir)

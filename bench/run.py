@@ -1,9 +1,13 @@
-"""gcsd benchmark runner: routing throughput and latency against MAVProxy, and one vehicle's cost.
+"""gcsd benchmark runner: routing throughput and latency against mavlink-router and MAVProxy, and
+one vehicle's cost.
 
     python -m bench                      # everything (about 5 minutes on an idle machine)
     python -m bench --quick              # smoke run (about 1 minute)
     python -m bench throughput latency   # just these; also: harness, vehicle, params, mission, signing, ftp
-    python -m bench --routers mavproxy   # only one router (gcsd, mavproxy, or both: gcsd,mavproxy)
+    python -m bench --routers mavproxy   # only some routers (default gcsd,mavlink-router,mavproxy)
+
+mavlink-router is the binary in $GCSD_MAVLINK_ROUTER (or mavlink-routerd on PATH); without it the
+bench says so and measures the others.
 
 Progress goes to stderr; the result table to stdout; ``--json FILE`` saves every figure and trial.
 See bench/README.md for the method.
@@ -35,18 +39,24 @@ from bench import swarm as bench_swarm  # noqa: E402
 from bench import params as bench_params  # noqa: E402
 from bench.measure import Path, SeqAllocator, log  # noqa: E402
 from bench.peers import start_receiver, start_sender  # noqa: E402
+from bench.report import routers_table  # noqa: E402
 from bench.routers import (  # noqa: E402
     export_gcsd_rev,
     free_udp_port,
     gcsd_available,
     gcsd_config,
     gcsd_env,
+    mavlink_router_binary,
+    mavlink_router_version,
     routing_gcsd_config,
+    routing_mavlink_router_config,
     start_gcsd,
+    start_mavlink_router,
     start_mavproxy,
 )
 
 WHAT = ("harness", "throughput", "latency", "vehicle", "params", "mission", "signing", "swarm", "ftp")
+ROUTERS = {"gcsd": "gcsd", "mavlink-router": "mavlink-router", "mavproxy": "MAVProxy"}  # name -> column
 LATENCY_RATE = 1000
 
 
@@ -81,7 +91,8 @@ def parse_args(argv):
     p.add_argument("what", nargs="*", metavar="WHAT",
                    help=f"measurements to run: {', '.join(WHAT)} or all (default all)")
     p.add_argument("--quick", action="store_true", help="short trials, coarse search: a smoke run")
-    p.add_argument("--routers", default="gcsd,mavproxy", help="comma list of gcsd, mavproxy")
+    p.add_argument("--routers", default="gcsd,mavlink-router,mavproxy",
+                   help="comma list of gcsd, mavlink-router, mavproxy (default all three)")
     p.add_argument("--trial-s", type=float, help="seconds per throughput trial (5; quick 1)")
     p.add_argument("--precision", type=float, help="bisection stops within this fraction (0.05; quick 0.2)")
     p.add_argument("--latency-s", type=float, help="seconds of latency sampling (10; quick 2)")
@@ -106,7 +117,7 @@ def parse_args(argv):
     a.what = set(WHAT) if "all" in what else what
     a.routers = [r.strip() for r in a.routers.split(",") if r.strip()]
     for r in a.routers:
-        if r not in ("gcsd", "mavproxy"):
+        if r not in ROUTERS:
             p.error(f"unknown router {r!r}")
     q = a.quick
     a.trial_s = a.trial_s or (1.0 if q else 5.0)
@@ -144,6 +155,7 @@ class Runner:
                                                          for k, v in vars(args).items()}}
         self.notes: list[str] = []
         self.gcsd_env = None
+        self.mavlink_router: str | None = None
         if args.gcsd_rev:
             src, commit = export_gcsd_rev(FsPath(__file__).resolve().parent.parent, args.gcsd_rev,
                                           self.workdir / "gcsd-rev")
@@ -170,19 +182,24 @@ class Runner:
     def router_path(self, name: str) -> Path:
         s, r = self.peers()
         port_a = free_udp_port()
+        port_b = free_udp_port()
         if name == "gcsd":
-            port_b = free_udp_port()
             cfg = routing_gcsd_config(self.workdir, port_a, port_b)
             prof = self._profile("gcsd-routing.prof")
             router = start_gcsd(self.workdir, cfg, prof, self.gcsd_env)
             s.call("dest", ("127.0.0.1", port_a))
             r.call("peer", ("127.0.0.1", port_b), False)  # receiver is a udp-server client of channel b
+        elif name == "mavlink-router":  # the same two UDP servers: endpoint a in, endpoint b out
+            cfg = routing_mavlink_router_config(self.workdir, port_a, port_b)
+            router = start_mavlink_router(self.workdir, self.mavlink_router, cfg)
+            s.call("dest", ("127.0.0.1", port_a))
+            r.call("peer", ("127.0.0.1", port_b), False)
         else:
             router = start_mavproxy(self.workdir, port_a, r.port)
             s.call("dest", ("127.0.0.1", port_a))
             r.call("peer", None, True)  # heartbeat back to MAVProxy's --out socket once it is seen
         ports = {"router-in": port_a, "receiver": r.port}
-        if name == "gcsd":
+        if name != "mavproxy":
             ports["router-b"] = port_b
         path = Path(name, s, r, self.seqs, router, ports, idle_threshold_pct=self.a.idle_threshold,
                     idle_wait_s=self.a.idle_wait)
@@ -217,6 +234,14 @@ class Runner:
                 a.routers = [r for r in a.routers if r != "gcsd"]
                 a.what -= {"vehicle", "params", "mission", "signing", "ftp"}
                 log(f"gcsd not runnable: {text}")
+        if "mavlink-router" in a.routers and a.what & {"throughput", "latency"}:
+            self.mavlink_router, how = mavlink_router_binary()
+            if self.mavlink_router is None:
+                self.notes.append(f"mavlink-router skipped: {how}")
+                a.routers = [r for r in a.routers if r != "mavlink-router"]
+            else:
+                self.res["mavlink_router_version"] = f"{mavlink_router_version(self.mavlink_router)} ({how})"
+            log(f"mavlink-router: {self.res.get('mavlink_router_version') or 'skipped: ' + how}")
         if a.what & {"harness", "throughput", "latency"}:
             self.harness()
         for name in a.routers:
@@ -306,7 +331,11 @@ class Runner:
 
     # ----------------------------------------------------------------------------------- output
     def table(self) -> str:
-        g, m, d = self.res.get("gcsd", {}), self.res.get("mavproxy", {}), self.res.get("direct", {})
+        g, d = self.res.get("gcsd", {}), self.res.get("direct", {})
+        routed = {name: self.res.get(name, {}) for name in ROUTERS}
+
+        def each(f) -> dict[str, float | None]:
+            return {name: f(x) for name, x in routed.items()}
 
         def thr(x):
             t = x.get("throughput")
@@ -316,57 +345,50 @@ class Runner:
             t = x.get("throughput")
             return None if t is None else t.router_cpu_pct
 
-        def lat(x, attr):
-            t = x.get("latency")
-            return None if t is None else getattr(t, attr)
+        def us_per_packet(x):  # CPU per routed packet at the best clean rate
+            t = x.get("throughput")
+            return None if t is None or not t.rate or t.router_cpu_pct is None else t.router_cpu_pct / 100 / t.rate * 1e6
 
-        def added(x, attr):  # routed minus the direct path measured in alternating blocks
-            t = x.get("latency")
-            return None if t is None else getattr(t, "added_" + attr)
+        def lat(attr):
+            return each(lambda x: None if x.get("latency") is None else getattr(x["latency"], attr))
+
+        def vs_router(limit: float, better: str):  # SPEC: relative to mavlink-router in the same run
+            def check(v):
+                gv, rv = v.get("gcsd"), v.get("mavlink-router")
+                if rv is None:
+                    return None
+                return gv >= limit * rv if better == "hi" else gv <= limit * rv
+            return check
+
+        def throughput_ok(v):
+            rel = vs_router(1.5, "hi")(v)
+            return v["gcsd"] >= 40000 and rel is not False
 
         veh = g.get("vehicle")
         starts = sorted(veh.start_to_heartbeat_s) if veh else []
+        only_gcsd = lambda v: {"gcsd": v}  # noqa: E731
         rows = [
-            ("packets routed between two UDP channels, no loss (pkt/s)", thr(g), thr(m), "hi", ">= 40000",
-             lambda v: v >= 40000),
-            ("  router CPU at that rate (% of one core)", tcpu(g), tcpu(m), None, "", None),
-            (f"latency through router, p50, {LATENCY_RATE} pkt/s (ms)", lat(g, "p50_ms"), lat(m, "p50_ms"), "lo", "", None),
-            (f"latency through router, p99, {LATENCY_RATE} pkt/s (ms)", lat(g, "p99_ms"), lat(m, "p99_ms"), "lo", "", None),
-            ("latency added by routing, p50 (ms)", added(g, "p50_ms"), added(m, "p50_ms"), "lo", "", None),
-            (f"latency added by routing, p99, {LATENCY_RATE} pkt/s (ms)", added(g, "p99_ms"), added(m, "p99_ms"), "lo",
-             "<= 1", lambda v: v <= 1.0),
-            ("CPU, one vehicle, default rates, 2 GCS (% of one core)", veh.cpu_pct if veh else None, None, None,
-             "<= 3", lambda v: v <= 3.0),
-            ("resident memory, one vehicle (MB)", veh.rss_mb if veh else None, None, None, "<= 60",
-             lambda v: v <= 60.0),
-            ("start to first HEARTBEAT, median (s)", starts[len(starts) // 2] if starts else None, None, None,
-             "<= 1", lambda v: v <= 1.0),
-            ("start to first HEARTBEAT, worst (s)", starts[-1] if starts else None, None, None, "<= 1",
-             lambda v: v <= 1.0),
+            ("packets routed between two UDP channels, no loss (pkt/s)", each(thr), "hi",
+             ">= 40000 and >= 1.5x mavlink-router", throughput_ok),
+            ("  router CPU at that rate (% of one core)", each(tcpu), None, "", None),
+            ("  router CPU per routed packet (us)", each(us_per_packet), "lo", "<= 1.5x mavlink-router's",
+             vs_router(1.5, "lo")),
+            (f"latency through router, p50, {LATENCY_RATE} pkt/s (ms)", lat("p50_ms"), "lo", "", None),
+            (f"latency through router, p99, {LATENCY_RATE} pkt/s (ms)", lat("p99_ms"), "lo", "", None),
+            ("latency added by routing, p50 (ms)", lat("added_p50_ms"), "lo", "", None),
+            (f"latency added by routing, p99, {LATENCY_RATE} pkt/s (ms)", lat("added_p99_ms"), "lo", "<= 1",
+             lambda v: v["gcsd"] <= 1.0),
+            ("CPU, one vehicle, default rates, 2 GCS (% of one core)", only_gcsd(veh.cpu_pct if veh else None), None,
+             "<= 3", lambda v: v["gcsd"] <= 3.0),
+            ("resident memory, one vehicle (MB)", only_gcsd(veh.rss_mb if veh else None), None, "<= 60",
+             lambda v: v["gcsd"] <= 60.0),
+            ("start to first HEARTBEAT, median (s)", only_gcsd(starts[len(starts) // 2] if starts else None), None,
+             "<= 1", lambda v: v["gcsd"] <= 1.0),
+            ("start to first HEARTBEAT, worst (s)", only_gcsd(starts[-1] if starts else None), None, "<= 1",
+             lambda v: v["gcsd"] <= 1.0),
         ]
-
-        def fmt(v):
-            if v is None:
-                return "n/a"
-            if abs(v) >= 1000:
-                return f"{v:,.0f}"
-            if abs(v) >= 10:
-                return f"{v:.1f}"
-            return f"{v:.3f}"
-
-        head = ("metric", "gcsd", "MAVProxy", "gcsd/MAVProxy", "SPEC target", "gcsd meets")
-        body = []
-        for name, gv, mv, better, target, ok in rows:
-            if gv is None and mv is None:
-                continue
-            ratio = "n/a"
-            if gv is not None and mv not in (None, 0):
-                ratio = f"{gv / mv:.2f}" + {"hi": " (higher better)", "lo": " (lower better)"}.get(better, "")
-            meets = "" if ok is None or gv is None else ("yes" if ok(gv) else "NO")
-            body.append((name, fmt(gv), fmt(mv), ratio, target, meets))
-        widths = [max(len(r[i]) for r in (head, *body)) for i in range(len(head))]
-        line = lambda r: "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))  # noqa: E731
-        out = [line(head), "  ".join("-" * w for w in widths), *map(line, body)]
+        shown = {name: label for name, label in ROUTERS.items() if name in self.a.routers or name == "gcsd"}
+        out = routers_table(shown, rows).splitlines()
 
         mc = self.res["machine"]
         out.insert(0, f"gcsd bench, {mc['date']}, {mc['nproc']} CPUs ({mc['cpu']}), Python {mc['python']}, "
@@ -381,13 +403,13 @@ class Runner:
             dl = d["latency"]
             extra.append(f"direct-path latency at {LATENCY_RATE} pkt/s, alone: p50 {dl.p50_ms:.3f} ms, "
                          f"p99 {dl.p99_ms:.3f} ms")
-        for name, x in (("gcsd", g), ("MAVProxy", m)):
+        for name, x in ((ROUTERS[n], routed[n]) for n in ROUTERS):
             t = x.get("latency")
             if t is not None and t.direct_p50_ms is not None:
                 extra.append(f"{name} latency: baseline (direct path, in blocks alternating with the routed ones) "
                              f"p50 {t.direct_p50_ms:.3f} ms, p99 {t.direct_p99_ms:.3f} ms; {t.blocks} block pairs, "
                              f"{t.disturbed_blocks} discarded as disturbed; routed max {t.max_ms:.3f} ms")
-        for name, x in (("gcsd", g), ("MAVProxy", m)):
+        for name, x in ((ROUTERS[n], routed[n]) for n in ROUTERS):
             t = x.get("throughput")
             if t is not None and t.sender_limited:
                 extra.append(f"{name}: throughput search stopped by the sender (figure is a lower bound)")
@@ -400,7 +422,7 @@ class Runner:
                          f"{', '.join(f'{s:.3f}' for s in veh.start_to_heartbeat_s)} s (UDP port bound after "
                          f"{', '.join(f'{s:.3f}' for s in veh.port_bound_s)} s); gcsd {veh.stop}")
         others = []
-        for x in (g, m, d):
+        for x in (*routed.values(), d):
             if x.get("throughput") is not None:
                 others += [t.other_cpu_pct for t in x["throughput"].trials]
             if x.get("latency") is not None:
