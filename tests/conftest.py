@@ -23,8 +23,9 @@ START_TIMEOUT_S = 5.0
 
 
 class RunningDaemon:
-    def __init__(self, config) -> None:
+    def __init__(self, config, backend=None) -> None:
         self.config = config
+        self.backend = backend  # gcsd.embed: backend(index) in place of the simulation
         self.gcs: GCS | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None
@@ -36,7 +37,7 @@ class RunningDaemon:
         async def body():
             self._loop = asyncio.get_running_loop()
             self._stop = asyncio.Event()
-            self.gcs = GCS(self.config)
+            self.gcs = GCS(self.config, backend=self.backend)
             runner = asyncio.create_task(self.gcs.run(self._stop))
             await self.gcs.all_open.wait()
             self._ready.set()
@@ -68,6 +69,10 @@ class RunningDaemon:
                 return ch.local_address[1]
         raise KeyError(name)
 
+    def status(self) -> dict:
+        """What `gcsd status --json` shows (taken in the daemon's own thread)."""
+        return asyncio.run_coroutine_threadsafe(_call(self.gcs.status), self._loop).result(5.0)
+
     def stats(self, name: str) -> dict[str, int]:
         for ch in self.gcs.channels:
             if ch.name == name:
@@ -75,15 +80,19 @@ class RunningDaemon:
         raise KeyError(name)
 
 
+async def _call(fn):
+    return fn()
+
+
 @pytest.fixture
 def daemon(tmp_path: Path):
     started: list[RunningDaemon] = []
 
-    def start(conf: str | dict) -> RunningDaemon:
+    def start(conf: str | dict, backend=None) -> RunningDaemon:
         data = yaml.safe_load(conf) if isinstance(conf, str) else dict(conf)
         data.setdefault("state_dir", str(tmp_path / "state"))
         config = parse_config(yaml.safe_dump(data), "test.yaml")
-        d = RunningDaemon(config).start()
+        d = RunningDaemon(config, backend).start()
         started.append(d)
         return d
 

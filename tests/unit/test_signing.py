@@ -5,8 +5,8 @@ import os
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.signing import (
-    BAD_SIGNATURE, NO_KEY, REPLAY, STALE, UNITS_PER_S, UNSIGNED, SavedSigning, Signing, SigningManager,
-    SigningStore, wall_to_units,
+    BAD_SIGNATURE, FUTURE, FUTURE_LIMIT_S, MAX_STREAMS, NO_KEY, REPLAY, STALE, UNITS_PER_S, UNSIGNED,
+    SavedSigning, Signing, SigningManager, SigningStore, wall_to_units,
 )
 
 KEY = bytes(range(32))
@@ -142,3 +142,28 @@ def test_a_valid_signature_on_an_unsigned_ok_channel_still_advances_the_stream()
     assert check(s, raw, unsigned_ok=True) is None
     assert s.timestamp == NOW + 50
     assert check(s, raw) == REPLAY
+
+
+def test_a_stream_forgotten_when_the_table_is_full_cannot_be_replayed():
+    s = Signing(KEY, NOW)
+    captured = signed_frame(timestamp=NOW + 1, link_id=0)
+    assert check(s, captured) is None
+    for i in range(1, MAX_STREAMS + 6):  # more new streams than the table holds, all later
+        assert s.check(signed_frame(timestamp=NOW + 10 + i, link_id=i % 256, sysid=200 + i // 256), 76,
+                       200 + i // 256, 190, False) is None
+    assert check(s, captured) == REPLAY
+    assert check(s, signed_frame(timestamp=NOW + 1000, link_id=0)) is None, "the stream itself may come back"
+
+
+def test_a_timestamp_more_than_five_minutes_ahead_of_the_wall_clock_is_refused_and_changes_nothing():
+    s = Signing(KEY, NOW)
+    ahead = signed_frame(timestamp=wall_to_units(WALL + FUTURE_LIMIT_S + 1))
+    assert s.check(ahead, 76, 255, 190, False, WALL) == FUTURE
+    assert s.timestamp == NOW
+    near = signed_frame(timestamp=wall_to_units(WALL + FUTURE_LIMIT_S - 1), link_id=1)
+    assert s.check(near, 76, 255, 190, False, WALL) is None
+
+
+def test_the_future_limit_is_not_applied_while_the_wall_clock_is_not_set():
+    s = Signing(KEY, NOW)
+    assert s.check(signed_frame(timestamp=NOW + 10 * 365 * 86400 * UNITS_PER_S), 76, 255, 190, False, 1000.0) is None
