@@ -1,11 +1,12 @@
 """The typed parameter store: C-cast values, integer rounding, ranges, read-only, listeners."""
 
 import math
+import struct
 
 import pytest
 
 from gcsd.params import INT8, INT16, INT32, REAL32, ParamDef, ParamStore, SetResult, as_float, to_type
-from gcsd.params.parmfile import format_parm, parse_parm
+from gcsd.params.parmfile import format_parm, format_real32, parse_parm
 
 
 def store():
@@ -18,9 +19,10 @@ def store():
     ])
 
 
-def test_parameters_are_indexed_in_name_order():
+def test_parameters_are_indexed_in_definition_order():
+    """ArduPilot's index order is the order of the definitions (params/data/<type>.tsv)."""
     s = store()
-    assert [e.name for e in s.entries()] == ["A_INT16", "B_INT8", "C_INT32", "D_REAL", "E_RO"]
+    assert [e.name for e in s.entries()] == ["B_INT8", "A_INT16", "C_INT32", "D_REAL", "E_RO"]
     assert s.index_of("C_INT32") == 2 and s.entry(2).name == "C_INT32"
 
 
@@ -67,6 +69,16 @@ def test_values_outside_the_documented_range_are_refused():
     assert s.get("A_INT16") == 1500
 
 
+def test_our_own_writes_are_not_held_to_the_documented_range():
+    """A calibration writes what it measured (ArduPilot documents COMPASS_OFS_X as -400..400 and
+    still stores a larger measured offset): force=True skips the range, never the C type."""
+    s = store()
+    assert s.set("A_INT16", 2500.0, force=True) is SetResult.CHANGED
+    assert s.get("A_INT16") == 2500
+    assert s.set("B_INT8", 1000.0, force=True) is SetResult.CHANGED
+    assert s.get("B_INT8") == 127
+
+
 def test_listeners_run_after_a_change_only():
     s = store()
     seen = []
@@ -89,7 +101,30 @@ def test_parm_round_trip_and_bad_lines_are_reported_with_numbers():
     text = format_parm(s.changed_from_default()) + "GARBAGE LINE HERE\nB_INT8,5\n# comment\nC_INT32 nan\n"
     values, problems = parse_parm(text)
     assert values == {"A_INT16": 1234.0, "D_REAL": 0.25, "B_INT8": 5.0}
-    assert [(p.line, p.reason) for p in problems] == [(3, "expected NAME VALUE"), (6, "value is not finite")]
+    assert [(p.line, p.reason) for p in problems] == [(3, "expected NAME VALUE"), (6, "C_INT32: nan is not a finite number")]
+
+
+@pytest.mark.parametrize("value", [0.35000002, 0.1, 1e-45, 3.4028235e38, -2.7182817, 123456.79, 1 / 3, 0.0])
+def test_real32_values_survive_a_write_and_read_bit_exact(value):
+    s = ParamStore([ParamDef("D_REAL", REAL32, 7.0)])
+    s.set("D_REAL", value)
+    text = format_parm(s.changed_from_default())
+    values, problems = parse_parm(text)
+    assert problems == []
+    assert struct.pack("<f", values["D_REAL"]) == struct.pack("<f", s.get("D_REAL"))
+
+
+def test_real32_is_written_with_the_fewest_digits_that_read_back_exactly():
+    assert format_real32(as_float(0.35000002)) == "0.35000002"  # "%.7g" wrote 0.35: another float32
+    assert format_real32(as_float(0.1)) == "0.1"
+    assert format_real32(as_float(0.35)) == "0.35"
+
+
+def test_a_real32_value_beyond_the_float32_range_is_out_of_range_not_an_overflow():
+    s = ParamStore([ParamDef("D_REAL", REAL32, 7.0)])
+    assert s.set("D_REAL", 1e39) is SetResult.OUT_OF_RANGE
+    assert s.set("D_REAL", -1e39) is SetResult.OUT_OF_RANGE
+    assert s.get("D_REAL") == 7.0
 
 
 def test_duplicate_names_are_a_definition_error():

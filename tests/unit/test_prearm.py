@@ -22,7 +22,7 @@ def _far_circle(h: Harness) -> None:
 
 
 CHECKS = [
-    ("angle_max", {"ANGLE_MAX": 9000}, None, "PreArm: Check ANGLE_MAX"),
+    ("angle_max", {}, lambda h: _own_write(h, "ANGLE_MAX", 9000), "PreArm: Check ANGLE_MAX"),
     ("gps_fix", {"SIM_GPS_DISABLE": 1}, None, "PreArm: Need 3D Fix"),
     ("gps_hdop", {"SIM_GPS_HDOP": 3.0}, None, "PreArm: High GPS HDOP"),
     ("battery_voltage", {"BATT_ARM_VOLT": 20.0}, None, "PreArm: Battery below minimum arming voltage"),
@@ -30,11 +30,18 @@ CHECKS = [
     ("battery_low_failsafe", {"BATT_LOW_VOLT": 17.0}, None, "PreArm: Battery 1 low voltage failsafe"),
     ("rc_min", {"RC1_MIN": 1400}, None, "PreArm: RC1_MIN too high"),
     ("rc_max", {"RC2_MAX": 1600}, None, "PreArm: RC2_MAX too low"),
-    ("rc_trim", {"RC4_TRIM": 1950}, None, "PreArm: RC4_TRIM out of range"),
-    ("compass", {"COMPASS_OFS_X": 2000.0}, None, "PreArm: Compass offsets too high"),
+    ("rc_trim", {"RC4_TRIM": 2100}, None, "PreArm: RC4_TRIM out of range"),  # RC4_MAX is 2000
+    ("compass", {}, lambda h: _own_write(h, "COMPASS_OFS_X", 2000.0), "PreArm: Compass offsets too high"),
     ("fence_outside", {"FENCE_ENABLE": 1, "FENCE_TYPE": 4}, _far_circle, "PreArm: Fence: vehicle outside the polygon fence"),
     ("fence_no_position", {"FENCE_ENABLE": 1, "SIM_GPS_DISABLE": 1}, None, "PreArm: Fence requires position"),
 ]
+
+
+def _own_write(h: Harness, name: str, value: float) -> None:
+    """A value no ground station can write (outside ArduPilot's documented range: ANGLE_MAX
+    1000..8000, COMPASS_OFS_X -400..400) but gcsd itself can: a compass calibration's result,
+    a saved file. The check must still catch it."""
+    assert h.node.params.set(name, value, force=True).value == "changed"
 
 
 def _break(h: Harness, params: dict, setup) -> None:
@@ -81,7 +88,7 @@ def test_arming_check_bitmask_selects_checks(tmp_path):
 
 def test_every_failing_check_is_reported_not_just_the_first(tmp_path):
     h = Harness(tmp_path)
-    _break(h, {"RC1_MIN": 1400, "COMPASS_OFS_Y": -3000.0}, None)
+    _break(h, {"RC1_MIN": 1400}, lambda h: _own_write(h, "COMPASS_OFS_Y", -3000.0))
     mark = h.mark()
     assert h.arm() == FAILED
     assert {"PreArm: RC1_MIN too high", "PreArm: Compass offsets too high"} <= set(h.texts(mark))
@@ -89,7 +96,7 @@ def test_every_failing_check_is_reported_not_just_the_first(tmp_path):
 
 def test_run_prearm_checks_reports_failures_without_arming(tmp_path):
     h = Harness(tmp_path)
-    _break(h, {"ANGLE_MAX": 500}, None)
+    _break(h, {}, lambda h: _own_write(h, "ANGLE_MAX", 500))
     mark = h.mark()
     assert h.command(M.MAV_CMD_RUN_PREARM_CHECKS) == ACCEPTED
     assert "PreArm: Check ANGLE_MAX" in h.texts(mark)

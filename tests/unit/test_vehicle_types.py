@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 from pymavlink import mavutil
 
+from gcsd.params import parameter_set
 from gcsd.vehicles import VEHICLE_TYPES
 
 READ_ELSEWHERE = {  # parameter -> where it acts, when not through Settings
@@ -38,10 +39,13 @@ def _candidates(d):
 @pytest.mark.parametrize("name", sorted(n for n in VEHICLE_TYPES if VEHICLE_TYPES[n].params))
 def test_every_vehicle_parameter_changes_the_settings_or_is_read_elsewhere(name):
     v = VEHICLE_TYPES[name]
-    defaults = {d.name: d.default for d in v.params}
+    every = parameter_set(v.parameter_set())
+    defaults = {d.name: d.default for d in every}
     base = v.settings(defaults.__getitem__)
     inert = []
-    for d in v.params:
+    by_name = {d.name: d for d in every}
+    assert set(v.params) <= set(by_name)  # ArduPilot's names for the type: nothing invented
+    for d in (by_name[n] for n in v.params):
         moves = any(v.settings(dict(defaults, **{d.name: x}).__getitem__) != base for x in _candidates(d))
         if not moves and d.name not in READ_ELSEWHERE:
             inert.append(d.name)

@@ -9,6 +9,7 @@ empty set means inside. MAVLink's FENCE_BREACH codes for FENCE_STATUS come from 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
@@ -33,8 +34,14 @@ class FenceConfig:
 
     @classmethod
     def from_params(cls, get: Callable[[str], float]) -> FenceConfig:
-        return cls(bool(get("FENCE_ENABLE")), int(get("FENCE_TYPE")), float(get("FENCE_ALT_MAX")),
-                   float(get("FENCE_ALT_MIN")), float(get("FENCE_RADIUS")), float(get("FENCE_MARGIN")))
+        """A vehicle type without some of these (Rover 4.6 has no FENCE_ALT_*) gets that fence off."""
+        def opt(name: str, absent: float) -> float:
+            try:
+                return float(get(name))
+            except KeyError:
+                return absent
+        return cls(bool(get("FENCE_ENABLE")), int(opt("FENCE_TYPE", 0)), opt("FENCE_ALT_MAX", math.inf),
+                   opt("FENCE_ALT_MIN", -math.inf), opt("FENCE_RADIUS", math.inf), opt("FENCE_MARGIN", 0.0))
 
 
 def breaches(s: VehicleState, cfg: FenceConfig, items: Iterable, ignore_min_alt: bool = False) -> set[int]:

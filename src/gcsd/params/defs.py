@@ -1,91 +1,103 @@
-"""Parameter definitions shared by every vehicle, as data. Each one is wired to behaviour:
+"""Parameter definitions: ArduPilot's parameter set of each vehicle type, as package data.
 
-- SYSID_THISMAV (at the next start), SYSID_MYGCS and SYSID_ENFORCE (at once): who we are and
-  which ground station may command us.
-- SRn_* for each channel n: the ten stream rates, applied at once.
-- ARMING_CHECK, GPS_HDOP_GOOD, BATT_ARM_VOLT, BATT_ARM_MAH, RCn_*, COMPASS_*:
-  the pre-arm checks (PreArm: ... on failure). Vehicle parameters (ANGLE_MAX, WPNAV_*, FENCE_*,
-  ...) are defined by each vehicle type (gcsd.vehicles).
-- BATT_CAPACITY: the simulated battery. RCn_*: RC_CHANNELS values at rest. SERVOn_*: the
-  scaling of SERVO_OUTPUT_RAW.
-- SCHED_LOOP_RATE: the fastest message interval accepted (0.8 x the loop rate), next start.
-- STAT_BOOTCNT, STAT_RUNTIME, FORMAT_VERSION: read-only, maintained by gcsd.
+`params/data/<set>.tsv` holds, in ArduPilot's index order, every parameter of a vehicle type:
+name, MAV_PARAM_TYPE, default, range, flags (R: ArduPilot wants a reboot, O: read-only), units
+and ArduPilot's display name. Copter, plane and rover are ArduPilot SITL's own lists mapped to
+4.6; the other types are the closest data that can be justified (tools/param_data.py builds the
+files once and says how; docs/parameters.md lists which parameters act).
+
+A file is parsed once per process (`parameter_set`, cached; ~1 000 definitions in a few ms) and
+its definitions are shared by every vehicle of that type. `vehicle_defs` then replaces the few
+defaults that come from the configuration: SYSID_THISMAV, SYSID_MYGCS, SYSID_ENFORCE (`gcs`
+section), SRn_* (channel n's `streams`; a channel beyond the set's SR groups gets its own SRn_
+group, shaped like SR0_), SIM_SPEEDUP (`vehicle.speedup`).
+
+`reboot` (gcsd sends "<NAME> takes effect at the next start" after a write) is set only where
+gcsd applies a value at the next start (SYSID_THISMAV, SCHED_LOOP_RATE); the metadata's R flag
+is kept in the data for reference: gcsd applies stream rates at once, for instance.
 """
 
 from __future__ import annotations
 
+import dataclasses
+from functools import cache
+from pathlib import Path
+
 from ..streams import PARAM_SUFFIX, STREAM_NAMES
 from .store import INT8, INT16, INT32, REAL32, ParamDef
 
-P = ParamDef
+DATA_DIR = Path(__file__).resolve().parent / "data"
+TYPES = {"INT8": INT8, "INT16": INT16, "INT32": INT32, "REAL32": REAL32}
+NEXT_START = frozenset({"SYSID_THISMAV", "SCHED_LOOP_RATE"})
+SETS = ("copter", "plane", "rover", "sub", "tracker", "blimp", "companion")
 
 
-def sysid_params(sysid: int, gcs_sysid: int, enforce: bool) -> list[ParamDef]:
-    return [
-        P("SYSID_THISMAV", INT16, sysid, 1, 255, "", "MAVLink system id of this vehicle", reboot=True),
-        P("SYSID_MYGCS", INT16, gcs_sysid, 1, 255, "", "System id of the ground station in control"),
-        P("SYSID_ENFORCE", INT8, int(enforce), 0, 1, "", "Accept commands and writes only from SYSID_MYGCS"),
-    ]
+def _number(text: str) -> float | None:
+    return None if text == "" else float(text)
 
 
-def stream_params(channel_index: int, rates: dict[str, float]) -> list[ParamDef]:
-    return [
-        P(f"SR{channel_index}_{PARAM_SUFFIX[s]}", INT16, int(rates[s]), 0, 50, "Hz",
-          f"Stream rate of {s.upper()} on channel {channel_index}")
-        for s in STREAM_NAMES
-    ]
+@cache
+def parameter_set(name: str) -> tuple[ParamDef, ...]:
+    """The definitions of `params/data/<name>.tsv`, in ArduPilot's order."""
+    defs = []
+    for line in (DATA_DIR / f"{name}.tsv").read_text().splitlines():
+        if not line or line.startswith("#"):
+            continue
+        pname, ptype, default, lo, hi, flags, units, display = line.split("\t")
+        code = TYPES[ptype]
+        value = float(default) if code == REAL32 else int(float(default))
+        defs.append(ParamDef(pname, code, value, _number(lo), _number(hi), units, display,
+                             read_only="O" in flags, reboot=pname in NEXT_START))
+    return tuple(defs)
 
 
-def rc_params() -> list[ParamDef]:
-    out = []
-    for n in range(1, 17):
-        trim = 1100 if n == 3 else 1500  # throttle rests at its minimum
-        out += [
-            P(f"RC{n}_MIN", INT16, 1100, 800, 2200, "PWM", f"RC input {n} minimum"),
-            P(f"RC{n}_MAX", INT16, 1900, 800, 2200, "PWM", f"RC input {n} maximum"),
-            P(f"RC{n}_TRIM", INT16, trim, 800, 2200, "PWM", f"RC input {n} trim (value at rest)"),
-            P(f"RC{n}_DZ", INT16, 30 if n <= 4 else 0, 0, 200, "PWM", f"RC input {n} dead zone"),
-            P(f"RC{n}_REVERSED", INT8, 0, 0, 1, "", f"RC input {n} reversed"),
-            P(f"RC{n}_OPTION", INT16, 0, 0, 1000, "", f"RC input {n} auxiliary function"),
-        ]
-    return out
+def stream_param(name: str) -> tuple[int, str] | None:
+    """SRn_<suffix> -> (n, stream name); anything else -> None."""
+    if not name.startswith("SR") or "_" not in name:
+        return None
+    head, suffix = name.split("_", 1)
+    if not head[2:].isdigit():
+        return None
+    for stream in STREAM_NAMES:
+        if PARAM_SUFFIX[stream] == suffix:
+            return int(head[2:]), stream
+    return None
 
 
-def servo_params() -> list[ParamDef]:
-    out = []
-    for n in range(1, 17):
-        out += [
-            P(f"SERVO{n}_MIN", INT16, 1100, 800, 2200, "PWM", f"Servo output {n} minimum"),
-            P(f"SERVO{n}_MAX", INT16, 1900, 800, 2200, "PWM", f"Servo output {n} maximum"),
-            P(f"SERVO{n}_TRIM", INT16, 1500, 800, 2200, "PWM", f"Servo output {n} trim"),
-            P(f"SERVO{n}_REVERSED", INT8, 0, 0, 1, "", f"Servo output {n} reversed"),
-            P(f"SERVO{n}_FUNCTION", INT16, 33 + n - 1 if n <= 4 else 0, -1, 200, "",
-              f"Servo output {n} function (33..36 motors)"),
-        ]
-    return out
-
-
-def common_params() -> list[ParamDef]:
-    return [
-        P("ARMING_CHECK", INT32, 1, 0, 2**20, "", "Pre-arm checks to run: 0 none, 1 all, else a bitmask"),
-        P("GPS_HDOP_GOOD", INT16, 140, 100, 900, "", "HDOP below which the GPS is good enough to arm"),
-        P("BATT_CAPACITY", INT32, 5000, 0, 1_000_000, "mAh", "Battery capacity"),
-        P("BATT_ARM_VOLT", REAL32, 0.0, 0.0, 100.0, "V", "Minimum battery voltage to arm (0 off)"),
-        P("BATT_ARM_MAH", INT32, 0, 0, 1_000_000, "mAh", "Minimum remaining capacity to arm (0 off)"),
-        P("COMPASS_USE", INT8, 1, 0, 1, "", "Use the first compass"),
-        P("COMPASS_OFS_X", REAL32, 5.0, -4000, 4000, "mGauss", "Compass offset X"),
-        P("COMPASS_OFS_Y", REAL32, 13.0, -4000, 4000, "mGauss", "Compass offset Y"),
-        P("COMPASS_OFS_Z", REAL32, -18.0, -4000, 4000, "mGauss", "Compass offset Z"),
-        P("COMPASS_OFFS_MAX", INT16, 1800, 500, 3000, "", "Largest compass offset allowed to arm"),
-        P("SCHED_LOOP_RATE", INT16, 400, 50, 2000, "Hz", "Loop rate; messages may go at 0.8 x this", reboot=True),
-        P("STAT_BOOTCNT", INT16, 0, 0, 32767, "", "Number of starts", read_only=True),
-        P("STAT_RUNTIME", INT32, 0, 0, 2**31 - 1, "s", "Total time running", read_only=True),
-        P("FORMAT_VERSION", INT16, 120, 0, 32767, "", "Parameter storage format", read_only=True),
-    ]
-
-
-def base_params(sysid: int, gcs_sysid: int, enforce: bool, channel_rates: list[dict[str, float]]) -> list[ParamDef]:
-    defs = sysid_params(sysid, gcs_sysid, enforce) + common_params() + rc_params() + servo_params()
+def vehicle_defs(set_name: str, sysid: int, gcs_sysid: int, enforce: bool,
+                 channel_rates: list[dict[str, float]], speedup: float = 1.0) -> list[ParamDef]:
+    """A vehicle's definitions: the set, with the defaults the configuration decides."""
+    fixed: dict[str, float] = {"SYSID_THISMAV": sysid, "SYSID_MYGCS": gcs_sysid, "SYSID_ENFORCE": int(enforce),
+                               "SIM_SPEEDUP": speedup}
     for index, rates in enumerate(channel_rates):
-        defs += stream_params(index, rates)
-    return defs
+        for stream in STREAM_NAMES:
+            fixed[f"SR{index}_{PARAM_SUFFIX[stream]}"] = int(rates[stream])
+    out: list[ParamDef] = []
+    shape: dict[str, ParamDef] = {}  # stream -> the SR0_ definition, for channels the set lacks
+    last_sr = -1
+    for d in parameter_set(set_name):
+        sr = stream_param(d.name)
+        if sr is not None:
+            last_sr = len(out)
+            if sr[0] == 0:
+                shape[sr[1]] = d
+        if d.name in fixed and fixed[d.name] != d.default:
+            d = _with_default(d, fixed[d.name])
+        out.append(d)
+    have = {d.name for d in out}
+    extra = []
+    for index, rates in enumerate(channel_rates):
+        for stream in STREAM_NAMES:
+            name = f"SR{index}_{PARAM_SUFFIX[stream]}"
+            if name not in have and stream in shape:
+                extra.append(_with_default(dataclasses.replace(shape[stream], name=name), int(rates[stream])))
+    if extra:
+        out[last_sr + 1:last_sr + 1] = extra
+    return out
+
+
+def _with_default(d: ParamDef, value: float) -> ParamDef:
+    """d with a configured default; its range widened to hold it (the configuration was validated)."""
+    lo = d.min if d.min is None else min(d.min, value)
+    hi = d.max if d.max is None else max(d.max, value)
+    return dataclasses.replace(d, default=value, min=lo, max=hi)

@@ -1,8 +1,8 @@
 """Vehicle types: data and small hooks. Nothing outside this package asks which vehicle it is."""
 
+from ..params.defs import vehicle_defs
 from .base import VehicleType
 from .blimp import BLIMP
-from .common import sim_params
 from .companion import COMPANION
 from .copter import COPTER
 from .plane import PLANE
@@ -21,9 +21,10 @@ def vehicle_type(name: str) -> VehicleType:
         raise ValueError(f"vehicle type {name!r} is not available (have: {', '.join(VEHICLE_TYPES)})") from None
 
 
-def vehicle_params(vehicle: VehicleType, speedup: float) -> tuple:
-    """The vehicle type's own parameters, plus the simulation's when something moves."""
-    return vehicle.params + (sim_params(speedup) if vehicle.dynamics is not None else ())
+def vehicle_params(vehicle: VehicleType, sysid: int, gcs_sysid: int, enforce: bool,
+                   channel_rates: list[dict[str, float]], speedup: float) -> list:
+    """ArduPilot's parameter set of the vehicle type, with the configured defaults (gcsd.params.defs)."""
+    return vehicle_defs(vehicle.parameter_set(), sysid, gcs_sysid, enforce, channel_rates, speedup)
 
 
 __all__ = ["VEHICLE_TYPES", "VehicleType", "prearm_failures", "vehicle_params", "vehicle_type"]

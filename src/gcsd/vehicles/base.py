@@ -1,9 +1,9 @@
 """What a vehicle type supplies: data plus a few functions of the vehicle state.
 
 A VehicleType is MAV_TYPE, ArduPilot's mode numbers and names (from pymavlink's mode maps),
-what each mode does (a `Behaviour`), the dynamics the simulation uses, its own parameters
-(with `settings(get)` turning them into SI `Settings`), its pre-arm checks, its command
-differences (extra COMMAND_LONG/INT handlers), the messages it does not produce, and
+what each mode does (a `Behaviour`), the dynamics the simulation uses, which of ArduPilot's
+parameters of its type (params/data/) its `settings(get)` turns into SI `Settings`, its
+banner, its pre-arm checks, its command differences (extra COMMAND_LONG/INT handlers), the messages it does not produce, and
 ArduPilot's default stream rates for it. The services and the autopilot ask it, never
 `if copter:`.
 
@@ -22,10 +22,11 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from ..autopilot.settings import Behaviour, Settings
-from ..params.store import ParamDef
 from ..sim import VehicleState
+from .firmware import version_string
 
 M = mavlink
+COMPANION_BANNER = "gcsd 0.1.0 (companion computer)"
 STREAM_ORDER = ("raw_sens", "ext_stat", "rc_chan", "raw_ctrl", "position", "extra1", "extra2", "extra3",
                 "params", "adsb")
 
@@ -58,12 +59,26 @@ class VehicleType:
     commands: dict[int, Callable] = field(default_factory=dict)
     behaviours: dict[int, Behaviour] = field(default_factory=dict)
     dynamics: Callable[[], object] | None = None  # None: nothing moves (a companion computer)
-    params: tuple[ParamDef, ...] = ()
+    # the parameters settings() reads (the autopilot reloads them on a change); the whole set is
+    # ArduPilot's, as data: params/data/<param_set or name>.tsv (gcsd.params.defs)
+    params: tuple[str, ...] = ()
+    param_set: str = ""
+    firmware: str = ""  # the banner's firmware name (ArduCopter...); "" for a companion computer
+    banner_lines: Callable[[Callable[[str], float]], list[str]] = lambda get: []
     settings: Callable[[Callable[[str], float]], Settings] = lambda get: Settings()
     prearm_checks: tuple[Callable, ...] = ()
     not_produced: frozenset[int] = frozenset()  # message ids this vehicle never sends
     ardupilot_stream_rates: dict[str, int] = field(default_factory=dict)
     can_arm: bool = True  # a companion computer has nothing to arm
+
+    def parameter_set(self) -> str:
+        return self.param_set or self.name
+
+    def banner(self, get: Callable[[str], float]) -> list[str]:
+        """The banner STATUSTEXTs, as ArduPilot sends them (gcsd.vehicles.firmware)."""
+        if not self.firmware:
+            return [COMPANION_BANNER]
+        return [version_string(self.firmware)] + self.banner_lines(get)
 
     def base_mode(self, state: VehicleState) -> int:
         base = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED

@@ -1,16 +1,16 @@
 """Blimp: MAV_TYPE_AIRSHIP, Blimp's modes, a slow airship that drifts and loiters.
 
-Parameters: MAX_VEL_XY, MAX_VEL_Z (m/s), MAX_VEL_YAW (deg/s), MAX_POS_XY (m: the loiter
-tolerance inside which it lets the wind carry it), WP_RADIUS (m), FS_GCS_ENABLE, plus the
-shared groups. Commands: NAV_TAKEOFF in VELOCITY or LOITER (armed, on the ground).
+Parameters: Blimp's (params/data/blimp.tsv: the Blimp-4.7 metadata's names with the captured
+vehicles' types and values). Its settings read MAX_VEL_XY, MAX_VEL_Z (m/s), MAX_VEL_YAW (deg/s),
+MAX_POS_XY (m: the loiter tolerance inside which it lets the wind carry it), FS_GCS_ENABLE,
+FS_GCS_TIMEOUT and the failsafe actions; Blimp has no waypoint radius parameter (2 m).
+Commands: NAV_TAKEOFF in VELOCITY or LOITER (armed, on the ground).
 """
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import DISARM, Settings
 from ..autopilot.settings import Behaviour as B
-from ..params.store import INT8, REAL32
-from ..params.store import ParamDef as P
 from ..sim import BlimpDynamics, Limits
 from . import commands, common, prearm
 from .base import VehicleType, modes_named, stream_rates
@@ -19,16 +19,10 @@ from .modes import mode_mapping
 _modes = mode_mapping("blimp")
 _by_name = {v: k for k, v in _modes.items()}
 
-PARAMS = (
-    P("MAX_VEL_XY", REAL32, 1.5, 0.1, 10.0, "m/s", "Horizontal speed"),
-    P("MAX_VEL_Z", REAL32, 0.5, 0.1, 5.0, "m/s", "Vertical speed"),
-    P("MAX_VEL_YAW", REAL32, 20.0, 1.0, 180.0, "deg/s", "Yaw rate"),
-    P("MAX_POS_XY", REAL32, 5.0, 0.5, 100.0, "m", "Loiter tolerance: drift freely inside it"),
-    P("WP_RADIUS", REAL32, 2.0, 0.5, 100.0, "m", "A waypoint is reached within this distance"),
-    P("FS_GCS_ENABLE", INT8, 0, 0, 2, "", "GCS failsafe: 0 off, 1 land, 2 RTL"),
-    P("FS_GCS_TIMEOUT", REAL32, 5.0, 2.0, 120.0, "s", "GCS heartbeat loss before the failsafe"),
-) + common.fence_params(alt_max_m=50.0) + common.rally_params() + common.battery_failsafe_params(0, 0) \
-    + common.rc_override_params()
+# Blimp's parameters this module's settings() reads (all of them: params/data/blimp.tsv).
+PARAMS = ("MAX_VEL_XY", "MAX_VEL_Z", "MAX_VEL_YAW", "MAX_POS_XY", "FS_GCS_ENABLE", "FS_GCS_TIMEOUT") \
+    + common.FAILSAFE_PARAMS
+WP_RADIUS_M = 2.0  # Blimp has no waypoint radius parameter
 
 GCS_ACTIONS = {1: "LAND", 2: "RTL"}
 BATTERY_ACTIONS = {1: "LAND", 2: "RTL", 3: DISARM}
@@ -40,7 +34,7 @@ def settings(get) -> Settings:
     limits = Limits(
         cruise_speed_ms=xy, max_speed_ms=xy, accel_ms2=0.3, climb_ms=z, descent_ms=z, land_speed_ms=z * 0.5,
         land_alt_low_m=3.0, yaw_rate_dps=float(get("MAX_VEL_YAW")), angle_max_deg=5.0,
-        wp_radius_m=float(get("WP_RADIUS")), loiter_radius_m=float(get("MAX_POS_XY")), hover_throttle=0.2,
+        wp_radius_m=WP_RADIUS_M, loiter_radius_m=float(get("MAX_POS_XY")), hover_throttle=0.2,
         cruise_current_a=2.0,
     )
     return Settings(
@@ -54,6 +48,7 @@ def settings(get) -> Settings:
 
 BLIMP = VehicleType(
     name="blimp",
+    firmware="Blimp",
     mav_type=M.MAV_TYPE_AIRSHIP,
     modes=_modes,
     initial_mode=_by_name["MANUAL"],

@@ -45,6 +45,8 @@ def gps(node) -> list[str]:
     s = node.state
     if s.gps_fix_type < 3:
         return ["Need 3D Fix"]
+    if "GPS_HDOP_GOOD" not in node.params:  # ArduCopter's; the other types have no HDOP check
+        return []
     limit = node.params.get("GPS_HDOP_GOOD") / 100.0
     if s.hdop > limit:
         return [f"High GPS HDOP ({s.hdop:.2f} > {limit:.2f})"]
@@ -113,8 +115,8 @@ TRACKER_CHECKS = (gps, battery, compass)
 
 def prearm_failures(node) -> list[str]:
     """Every failing check of the node's vehicle type (ARMING_CHECK 0: none)."""
-    if node.params.get("ARMING_CHECK") == 0:
-        return []
+    if "ARMING_CHECK" not in node.params or node.params.get("ARMING_CHECK") == 0:
+        return []  # a type without ARMING_CHECK (AntennaTracker, a companion) has no arming checks
     failures: list[str] = []
     for check in node.vehicle.prearm_checks:
         failures += check(node)

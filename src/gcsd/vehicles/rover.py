@@ -1,17 +1,16 @@
 """ArduRover: MAV_TYPE_GROUND_ROVER, Rover's modes, a vehicle that drives and stops.
 
-Parameters: CRUISE_SPEED (m/s), CRUISE_THROTTLE (%), WP_SPEED (m/s, 0: CRUISE_SPEED),
-WP_RADIUS, LOIT_RADIUS (m), ATC_STR_RAT_MAX (deg/s), ATC_ACCEL_MAX (m/s/s), RTL_SPEED,
-MIS_DONE_BEHAVE (0 hold, 1 loiter, 2 acro, 3 manual), FS_GCS_ENABLE, FS_TIMEOUT, plus the
-shared groups. Command: DO_SET_REVERSE (drive backwards).
+Parameters: ArduRover 4.6's set (params/data/rover.tsv). Its settings read CRUISE_SPEED (m/s),
+CRUISE_THROTTLE (%), WP_SPEED (m/s, 0: CRUISE_SPEED), WP_RADIUS, LOIT_RADIUS (m), ATC_STR_RAT_MAX
+(deg/s), ATC_ACCEL_MAX (m/s/s), RTL_SPEED, MIS_DONE_BEHAVE (0 hold, 1 loiter, 2 acro, 3 manual),
+FS_GCS_ENABLE, FS_TIMEOUT and the failsafe actions (Rover 4.6 has no FENCE_ALT_*: its fence is
+horizontal). Command: DO_SET_REVERSE (drive backwards).
 """
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import DISARM, Settings
 from ..autopilot.settings import Behaviour as B
-from ..params.store import INT8, REAL32
-from ..params.store import ParamDef as P
 from ..sim import GroundDynamics, Limits
 from . import commands, common, prearm
 from .base import VehicleType, modes_named, stream_rates
@@ -20,20 +19,11 @@ from .modes import mode_mapping
 _modes = mode_mapping("rover")
 _by_name = {v: k for k, v in _modes.items()}
 
+# ArduRover 4.6's parameters this module's settings() reads (all of them: params/data/rover.tsv).
 PARAMS = (
-    P("CRUISE_SPEED", REAL32, 2.0, 0.0, 100.0, "m/s", "Cruise speed"),
-    P("CRUISE_THROTTLE", INT8, 50, 0, 100, "%", "Throttle at cruise speed"),
-    P("WP_SPEED", REAL32, 0.0, 0.0, 100.0, "m/s", "Speed to waypoints (0: CRUISE_SPEED)"),
-    P("WP_RADIUS", REAL32, 2.0, 0.0, 100.0, "m", "A waypoint is reached within this distance"),
-    P("LOIT_RADIUS", REAL32, 2.0, 0.5, 100.0, "m", "LOITER and HOLD drift tolerance"),
-    P("ATC_STR_RAT_MAX", REAL32, 120.0, 0.0, 1000.0, "deg/s", "Maximum turn rate"),
-    P("ATC_ACCEL_MAX", REAL32, 1.0, 0.0, 10.0, "m/s/s", "Maximum acceleration"),
-    P("RTL_SPEED", REAL32, 0.0, 0.0, 100.0, "m/s", "RTL speed (0: WP_SPEED)"),
-    P("MIS_DONE_BEHAVE", INT8, 0, 0, 3, "", "At the end of a mission: 0 hold, 1 loiter, 2 acro, 3 manual"),
-    P("FS_GCS_ENABLE", INT8, 0, 0, 2, "", "GCS failsafe: 0 off, 1 RTL, 2 hold"),
-    P("FS_TIMEOUT", REAL32, 1.5, 1.0, 100.0, "s", "GCS heartbeat loss before the failsafe"),
-) + common.fence_params(alt_max_m=100.0) + common.rally_params() + common.battery_failsafe_params(0, 0) \
-    + common.rc_override_params()
+    "CRUISE_SPEED", "CRUISE_THROTTLE", "WP_SPEED", "WP_RADIUS", "LOIT_RADIUS", "ATC_STR_RAT_MAX", "ATC_ACCEL_MAX",
+    "RTL_SPEED", "MIS_DONE_BEHAVE", "FS_GCS_ENABLE", "FS_TIMEOUT",
+) + common.FAILSAFE_PARAMS
 
 GCS_ACTIONS = {1: "RTL", 2: "HOLD"}
 BATTERY_ACTIONS = {1: "RTL", 2: "HOLD", 3: "RTL", 4: "HOLD", 5: DISARM}
@@ -62,6 +52,7 @@ def settings(get) -> Settings:
 
 ROVER = VehicleType(
     name="rover",
+    firmware="ArduRover",
     mav_type=M.MAV_TYPE_GROUND_ROVER,
     modes=_modes,
     initial_mode=_by_name["MANUAL"],

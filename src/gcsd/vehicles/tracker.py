@@ -11,29 +11,23 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import Behaviour as B
 from ..autopilot.settings import Settings
-from ..params.store import INT16, REAL32
-from ..params.store import ParamDef as P
 from ..sim import Limits, TrackerDynamics
-from . import common, prearm
+from . import prearm
 from .base import VehicleType, modes_named, stream_rates
 from .modes import mode_mapping
 
 _modes = mode_mapping("tracker")
 _by_name = {v: k for k, v in _modes.items()}
 
-PARAMS = (
-    P("YAW_SLEW_TIME", REAL32, 2.0, 0.1, 20.0, "s", "Time to pan through 360 degrees"),
-    P("PITCH_SLEW_TIME", REAL32, 2.0, 0.1, 20.0, "s", "Time to tilt through 180 degrees"),
-    P("PITCH_MIN", INT16, -90, -90, 0, "deg", "Lowest tilt"),
-    P("PITCH_MAX", INT16, 90, 0, 90, "deg", "Highest tilt"),
-    P("SCAN_SPEED_YAW", INT16, 2, 0, 100, "deg/s", "Pan rate while scanning"),
-    P("SYSID_TARGET", INT16, 0, 0, 255, "", "System id to track (0: the first vehicle heard)"),
-) + common.rc_override_params()
+# AntennaTracker 4.6's parameters this module's settings() reads (all of them: params/data/tracker.tsv).
+PARAMS = ("YAW_SLEW_TIME", "PITCH_SLEW_TIME", "PITCH_MIN", "PITCH_MAX", "SCAN_SPEED_YAW", "SYSID_TARGET")
+MIN_SLEW_S = 0.1  # ArduPilot's range allows 0; the simulation divides by it
 
 
 def settings(get) -> Settings:
     limits = Limits(
-        yaw_rate_dps=360.0 / float(get("YAW_SLEW_TIME")), climb_ms=180.0 / float(get("PITCH_SLEW_TIME")),
+        yaw_rate_dps=360.0 / max(float(get("YAW_SLEW_TIME")), MIN_SLEW_S),
+        climb_ms=180.0 / max(float(get("PITCH_SLEW_TIME")), MIN_SLEW_S),
         pitch_min_deg=float(get("PITCH_MIN")), pitch_max_deg=float(get("PITCH_MAX")), cruise_current_a=1.0,
         hover_throttle=0.3,
     )
@@ -43,6 +37,7 @@ def settings(get) -> Settings:
 
 TRACKER = VehicleType(
     name="tracker",
+    firmware="AntennaTracker",
     mav_type=M.MAV_TYPE_ANTENNA_TRACKER,
     modes=_modes,
     initial_mode=_by_name["MANUAL"],
