@@ -39,8 +39,6 @@ except ImportError:  # pragma: no cover
 MAVLink_message = mavlink.MAVLink_message
 STX_V1 = 0xFE
 STX_V2 = 0xFD
-MSG_ID_RADIO_STATUS = mavlink.MAVLINK_MSG_ID_RADIO_STATUS
-MSG_ID_RADIO = mavlink.MAVLINK_MSG_ID_RADIO
 
 
 class _MessageInfo:

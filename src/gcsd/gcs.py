@@ -171,7 +171,7 @@ class GCS:
             node.link(channel).push(MSG_ID_HEARTBEAT)
 
     def on_bad_crc(self, channel: Channel, raw: bytes) -> None:
-        for index in self.router._broadcast_channels(channel.index):
+        for index in self.router.broadcast_channels(channel.index):
             self.channels[index].write(raw)
         self.bad_crc_forwarded += 1
 

@@ -186,7 +186,7 @@ class Router:
             self.unknown_dropped += 1
             return IGNORE
         self.table.learn(sysid, compid, in_channel, now)  # refresh only: the route exists
-        return Decision(False, self._broadcast_channels(in_channel))
+        return Decision(False, self.broadcast_channels(in_channel))
 
     def _local_compid(self, target_system: int, target_component: int, broadcast_system: bool) -> bool:
         if broadcast_system:
@@ -204,7 +204,7 @@ class Router:
             and not table.has(sysid, compid, ch)
         )
 
-    def _broadcast_channels(self, in_channel: int) -> tuple[int, ...]:
+    def broadcast_channels(self, in_channel: int) -> tuple[int, ...]:
         return tuple(
             ch
             for ch in sorted(self.table.channels_with_routes())
