@@ -94,7 +94,22 @@ def test_mission_clear_then_home_change_gives_count_1():
     (jump(0), 3, M.MAV_MISSION_ERROR),  # home is not a jump target
     (jump(3), 3, M.MAV_MISSION_ERROR),  # beyond the plan
     (jump(-1), 3, M.MAV_MISSION_ERROR),
-    (jump(math.nan), 3, M.MAV_MISSION_ERROR),
+    (jump(math.nan), 3, M.MAV_MISSION_INVALID_PARAM1),  # ArduPilot's sanity_check_params comes first
+    # NaN and infinity (ArduPilot's sanity_check_params; z: its location check, and never stored)
+    (MissionItem(M.MAV_CMD_NAV_LOITER_TURNS, x=LAT, y=LON, z=20, param1=2, param3=math.nan), 3,
+     M.MAV_MISSION_INVALID_PARAM3),
+    (MissionItem(M.MAV_CMD_NAV_LOITER_TURNS, x=LAT, y=LON, z=20, param1=math.inf), 3,
+     M.MAV_MISSION_INVALID_PARAM1),
+    (wp(param2=-math.inf), 3, M.MAV_MISSION_INVALID_PARAM2),
+    (wp(param4=math.nan), 3, ACCEPTED),  # a waypoint's yaw: NaN is "keep the heading mode"
+    (wp(param4=math.inf), 3, M.MAV_MISSION_INVALID_PARAM4),
+    (MissionItem(M.MAV_CMD_NAV_VTOL_LAND, x=LAT, y=LON, param3=math.nan, param4=math.nan), 3, ACCEPTED),
+    (MissionItem(M.MAV_CMD_DO_CHANGE_SPEED, param4=math.nan), 3, M.MAV_MISSION_INVALID_PARAM4),
+    (wp(z=math.nan), 3, M.MAV_MISSION_INVALID_PARAM7),
+    (wp(z=83_000.0), 3, M.MAV_MISSION_INVALID_PARAM7),
+    (wp(z=-82_999.0), 3, ACCEPTED),
+    (MissionItem(M.MAV_CMD_DO_CHANGE_SPEED, param2=5, z=math.inf), 3, M.MAV_MISSION_INVALID_PARAM7),
+    (replace(MissionItem(31999), param1=math.nan), 3, M.MAV_MISSION_INVALID_PARAM1),
 ])
 def test_mission_item_checks(item, plan_count, result):
     assert mission_store().check_item(item, 1, plan_count) == result
@@ -134,6 +149,10 @@ def test_a_shorter_plan_resets_a_current_item_beyond_it():
     (replace(circle(), frame=M.MAV_FRAME_MISSION), M.MAV_MISSION_UNSUPPORTED_FRAME),
     (vertex(EXC, 256), M.MAV_MISSION_INVALID_PARAM1),
     (vertex(EXC, 255), ACCEPTED),
+    (vertex(EXC, math.nan), M.MAV_MISSION_INVALID_PARAM1),
+    (circle(radius=math.inf), M.MAV_MISSION_INVALID_PARAM1),
+    (circle(radius=math.nan), M.MAV_MISSION_INVALID_PARAM1),
+    (replace(circle(), z=math.nan), M.MAV_MISSION_INVALID_PARAM7),
 ])
 def test_fence_item_checks(item, result):
     assert FenceStore(100).check_item(item, 0, 1) == result
@@ -195,6 +214,7 @@ def test_fence_polygon_vertex_with_a_bad_location_is_refused():
     (rally(z=32768.0), M.MAV_MISSION_INVALID_PARAM7),
     (rally(z=-32769.0), M.MAV_MISSION_INVALID_PARAM7),
     (rally(z=math.inf), M.MAV_MISSION_INVALID_PARAM7),
+    (rally(param1=math.nan), M.MAV_MISSION_INVALID_PARAM1),
 ])
 def test_rally_item_checks(item, result):
     assert RallyStore(50).check_item(item, 0, 1) == result
@@ -231,6 +251,9 @@ def test_mission_save_writes_home_as_item_0():
     (FenceStore(100), polygon(INC, 2), "Fence: polygon at item 0 declares 2 vertices (needs at least 3)"),
     (mission_store(), [HOME, wp(1), jump(5)], "item 2: MAV_MISSION_ERROR"),
     (mission_store(), [HOME, wp(1), jump(1)], None),
+    (mission_store(), [HOME, wp(1, command=M.MAV_CMD_NAV_LOITER_TURNS, param3=math.nan)],
+     "item 1: MAV_MISSION_INVALID_PARAM3"),
+    (FenceStore(100), [circle(radius=math.inf)], "item 0: MAV_MISSION_INVALID_PARAM1"),
 ])
 def test_a_loaded_plan_gets_every_check_an_upload_would(store, plan, reason):
     assert validate(store, tuple(plan)) == reason

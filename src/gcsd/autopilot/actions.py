@@ -5,6 +5,10 @@ landing, mission start, speed, region of interest and yaw, servos and relays, ho
 continue, RC overrides and MANUAL_CONTROL (held RC_OVERRIDE_TIME seconds of real time), the
 position of the vehicle an antenna tracker follows. Each returns whether it was done; the
 command layer turns that into a MAV_RESULT. Mission DO items dispatch through `DO_TABLE`.
+
+The message layer refuses NaN, infinity and out-of-range values before they get here; these
+entry points check again (`location_ok`, `finite`) and refuse, because an embedding program
+calls them directly and a bad value in the state would break every telemetry message after it.
 """
 
 from __future__ import annotations
@@ -13,12 +17,21 @@ import math
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from ..mission.items import MissionItem
+from ..mission.items import LOCATION_ALT_MAX_M, MissionItem, check_values
 from ..sim.geo import distance_m, wrap_180
 from ..sim.state import Kind, Setpoint
 from .settings import Behaviour as B
 
 RC_MIN, RC_MAX = 800, 2200
+
+
+def finite(*values: float) -> bool:
+    return all(math.isfinite(v) for v in values)
+
+
+def location_ok(lat: float, lon: float, alt: float) -> bool:
+    """A position the state can hold: a real latitude/longitude, an altitude within +-83 km."""
+    return finite(lat, lon, alt) and -90 <= lat <= 90 and -180 <= lon <= 180 and abs(alt) <= LOCATION_ALT_MAX_M
 
 
 class Actions:
@@ -34,7 +47,7 @@ class Actions:
         """Guided takeoff to alt_rel_m above home: armed, in a guided behaviour, on the ground."""
         self.sync()
         s = self.state
-        if not s.armed or self.behaviour != B.GUIDED or not s.on_ground or alt_rel_m <= 0:
+        if not s.armed or self.behaviour != B.GUIDED or not s.on_ground or not 0 < alt_rel_m <= LOCATION_ALT_MAX_M:
             return False
         self.guided = Setpoint(Kind.TAKEOFF, s.lat, s.lon, s.home_alt_m + alt_rel_m)
         return True
@@ -69,6 +82,8 @@ class Actions:
 
     def goto(self, lat: float, lon: float, alt_amsl: float, speed: float | None = None,
              yaw_deg: float | None = None) -> bool:
+        if not location_ok(lat, lon, alt_amsl) or not finite(speed or 0.0, yaw_deg or 0.0):
+            return False
         if not self.in_guided() or not self.state.armed:
             return False
         self.guided = Setpoint(Kind.GOTO, lat, lon, alt_amsl, speed, yaw_deg)
@@ -76,6 +91,8 @@ class Actions:
         return True
 
     def velocity(self, vn: float, ve: float, vd: float, yaw_deg: float | None, now: float) -> bool:
+        if not finite(vn, ve, vd, yaw_deg or 0.0):
+            return False
         if not self.in_guided() or not self.state.armed:
             return False
         self.guided = Setpoint(Kind.VELOCITY, velocity=(vn, ve, vd), yaw_deg=yaw_deg)
@@ -83,6 +100,8 @@ class Actions:
         return True
 
     def change_altitude(self, alt_amsl: float) -> bool:
+        if not finite(alt_amsl) or abs(alt_amsl) > LOCATION_ALT_MAX_M:
+            return False
         if not self.in_guided() or not self.state.armed:
             return False
         g = self.guided if self.guided is not None and self.guided.kind in (Kind.GOTO, Kind.HOLD) else self._here(Kind.HOLD)
@@ -92,6 +111,8 @@ class Actions:
     def guided_mission_item(self, item: MissionItem, current: int) -> bool:
         """MISSION_ITEM(_INT) with current 2 (fly to) or 3 (change altitude), in GUIDED."""
         from .mission import item_location
+        if check_values(item) != M.MAV_MISSION_ACCEPTED:
+            return False
         lat, lon, alt = item_location(item, self.state)
         if current == 3:
             return self.change_altitude(alt)
@@ -136,12 +157,16 @@ class Actions:
 
     # --- pointing -------------------------------------------------------------------------------
     def set_roi(self, location: tuple[float, float, float] | None) -> bool:
+        if location is not None and not location_ok(*location):
+            return False
         self.roi = location
         if location is not None:
             self.yaw_target = None
         return True
 
     def condition_yaw(self, angle: float, rate: float, direction: float, relative: float) -> None:
+        if not finite(angle, direction, relative):
+            return
         heading = self.state.heading_deg
         if relative:
             target = heading + (angle if direction >= 0 else -angle)
@@ -152,12 +177,14 @@ class Actions:
     def observe_position(self, sysid: int, lat: float, lon: float, alt: float) -> None:
         """GLOBAL_POSITION_INT from another system: what an antenna tracker follows."""
         wanted = self.settings.track_sysid
+        if not location_ok(lat, lon, alt):
+            return
         if sysid != self.node.sysid and (wanted == 0 or wanted == sysid):
             self.tracked = (lat, lon, alt)
 
     # --- home ------------------------------------------------------------------------------------
     def set_home(self, lat: float, lon: float, alt: float, locked: bool = True) -> bool:
-        if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+        if not location_ok(lat, lon, alt):
             return False
         s = self.state
         s.home_lat, s.home_lon, s.home_alt_m = lat, lon, alt

@@ -11,9 +11,10 @@ NAV item becomes current (`pilot.set_current(seq)`, which MISSION_CURRENT report
 the store's current item from outside (MISSION_SET_CURRENT) restarts from that item.
 
 NAV items: WAYPOINT and SPLINE_WAYPOINT (hold param1 s, acceptance radius param2), TAKEOFF,
-LAND, RETURN_TO_LAUNCH, LOITER_UNLIM, LOITER_TIME (param1 s), LOITER_TURNS (param1 turns,
-param3 radius, negative counter-clockwise), LOITER_TO_ALT, DELAY (param1 s); any other NAV
-command completes at once. Latitude and longitude 0 mean "here". Altitudes follow the frame:
+LAND, RETURN_TO_LAUNCH, LOITER_UNLIM, LOITER_TIME (param1 s) and LOITER_TURNS (param1 turns,
+at most 255), both with param3 the radius (at most 2550 m, as ArduPilot stores it; negative
+counter-clockwise), LOITER_TO_ALT, DELAY (param1 s); any other NAV command completes at once.
+Items hold no NaN or infinity where one would be used (the stores refuse them, items.check_values). Latitude and longitude 0 mean "here". Altitudes follow the frame:
 GLOBAL is above mean sea level, the relative and terrain frames above home.
 """
 
@@ -31,6 +32,8 @@ NAV_LAST = M.MAV_CMD_NAV_LAST
 ABSOLUTE_FRAMES = frozenset({M.MAV_FRAME_GLOBAL, M.MAV_FRAME_GLOBAL_INT})
 ALT_TOLERANCE_M = 1.0
 ORBIT_LEAD_DEG = 25.0
+MAX_LOITER_RADIUS_M = 2550.0  # the largest radius ArduPilot's mission storage keeps (255 x 10 m)
+MAX_TURNS = 255  # LOITER_TURNS is stored in 8 bits
 
 
 def is_nav(command: int) -> bool:
@@ -204,8 +207,8 @@ class MissionRunner:
             nav["elapsed"] += dt
             return Setpoint(Kind.HOLD, s.lat, s.lon, s.alt_amsl_m), nav["elapsed"] >= item.param1
         if cmd in (M.MAV_CMD_NAV_LOITER_TIME, M.MAV_CMD_NAV_LOITER_TURNS):
-            radius = abs(item.param3 if cmd == M.MAV_CMD_NAV_LOITER_TURNS else item.param2) or pilot.loiter_radius_m()
-            direction = -1 if (item.param3 if cmd == M.MAV_CMD_NAV_LOITER_TURNS else item.param2) < 0 else 1
+            radius = min(abs(item.param3), MAX_LOITER_RADIUS_M) or pilot.loiter_radius_m()
+            direction = -1 if item.param3 < 0 else 1
             if not nav["arrived"]:
                 if pilot.at(lat, lon, alt, radius * 1.2 + pilot.accept_radius_m()):
                     nav["arrived"] = True
@@ -214,7 +217,7 @@ class MissionRunner:
             nav["elapsed"] += dt
             if cmd == M.MAV_CMD_NAV_LOITER_TIME:
                 return self._orbit(s, lat, lon, alt, radius, direction), nav["elapsed"] >= item.param1
-            return self._orbit(s, lat, lon, alt, radius, direction), nav["turned"] >= 360.0 * max(item.param1, 0.0)
+            return self._orbit(s, lat, lon, alt, radius, direction), nav["turned"] >= 360.0 * min(max(item.param1, 0.0), MAX_TURNS)
         return None, True
 
     def _orbit(self, s, lat: float, lon: float, alt: float, radius: float, direction: int) -> Setpoint:

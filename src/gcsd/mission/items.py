@@ -8,6 +8,14 @@ carry a location (pymavlink's MAV_CMD `has_location`, the same test MAVProxy use
 degrees, scaled by 1e7 in the global frames and metres scaled by 1e4 in the local frames; any
 other frame is UNSUPPORTED_FRAME. For commands without a location x/y are plain parameters and
 are truncated to integers. Downloads as MISSION_ITEM apply the inverse.
+
+`check_values` is the one value check every plan item passes (upload, FTP write, a plan file
+read at start, a guided "fly to" item), before any store-specific check: ArduPilot's
+AP_Mission::sanity_check_params (params 1-4: infinity never, NaN only where `NAN_PARAMS` says
+the command gives it a meaning, e.g. a waypoint's yaw) -> INVALID_PARAM1..4; z of a command
+with a location finite and within +-83 000 m (ArduPilot's LOCATION_ALT_MAX_M) ->
+INVALID_PARAM7. Better than ArduPilot, which drops z for other commands: gcsd stores items as
+uploaded, so a NaN or infinite z is refused on every item (INVALID_PARAM7), never stored.
 """
 
 from __future__ import annotations
@@ -27,6 +35,7 @@ DEGREES_E7 = 1e7
 LOCAL_SCALE = 1e4
 LAT_LIMIT_E7 = 90 * 10**7
 LON_LIMIT_E7 = 180 * 10**7
+LOCATION_ALT_MAX_M = 83_000.0  # ArduPilot's Location: altitudes an int24 of centimetres can hold
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,6 +51,29 @@ class MissionItem:
     x: int = 0  # latitude in degE7 for commands with a location, else param5 as an integer
     y: int = 0
     z: float = 0.0
+
+
+# params (1-based) where ArduPilot's sanity_check_params lets NaN through ("use the current yaw" etc.)
+NAN_PARAMS = {
+    M.MAV_CMD_NAV_WAYPOINT: frozenset({4}),
+    M.MAV_CMD_NAV_LAND: frozenset({4}),
+    M.MAV_CMD_NAV_TAKEOFF: frozenset({4}),
+    M.MAV_CMD_NAV_VTOL_TAKEOFF: frozenset({4}),
+    M.MAV_CMD_NAV_VTOL_LAND: frozenset({3, 4}),
+}
+INVALID_PARAM = (M.MAV_MISSION_INVALID_PARAM1, M.MAV_MISSION_INVALID_PARAM2, M.MAV_MISSION_INVALID_PARAM3,
+                 M.MAV_MISSION_INVALID_PARAM4)
+
+
+def check_values(item: MissionItem) -> int:
+    """MAV_MISSION_ACCEPTED, or the INVALID_PARAMn result for a value the item cannot honour."""
+    nan_ok = NAN_PARAMS.get(item.command, frozenset())
+    for n, value in enumerate((item.param1, item.param2, item.param3, item.param4), start=1):
+        if math.isinf(value) or (math.isnan(value) and n not in nan_ok):
+            return INVALID_PARAM[n - 1]
+    if not math.isfinite(item.z) or (has_location(item.command) and abs(item.z) >= LOCATION_ALT_MAX_M):
+        return M.MAV_MISSION_INVALID_PARAM7
+    return M.MAV_MISSION_ACCEPTED
 
 
 @cache

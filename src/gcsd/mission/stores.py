@@ -21,6 +21,10 @@ place) and only then makes it the plan. Nothing here touches a file itself; `sav
   and returns frame GLOBAL; keeping them lets a client read back what it wrote).
 - Rally (7.4): NAV_RALLY_POINT only, global frames, latitude, longitude and an altitude that
   fits ArduPilot's int16 metres (INVALID_PARAM5_X / 6_Y / 7).
+
+Every item of every plan first passes `items.check_values` (NaN and infinity refused with
+INVALID_PARAM1..4 / INVALID_PARAM7, ArduPilot's sanity_check_params), so a plan holding such a
+value is never stored, and a stored file holding one (written by an older gcsd) fails `load`.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from collections.abc import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from .items import GLOBAL_FRAMES, MissionItem, has_location, is_known_command, lat_ok, lon_ok
+from .items import GLOBAL_FRAMES, MissionItem, check_values, has_location, is_known_command, lat_ok, lon_ok
 
 ACCEPTED = M.MAV_MISSION_ACCEPTED
 VERTEX_COMMANDS = frozenset({
@@ -144,6 +148,9 @@ class MissionStore(PlanStore):
     def check_item(self, item: MissionItem, seq: int, plan_count: int) -> int:
         if seq == 0:
             return ACCEPTED  # replaced by home
+        values = check_values(item)  # before the command is looked at, as ArduPilot
+        if values != ACCEPTED:
+            return values
         if not is_known_command(item.command):
             return M.MAV_MISSION_UNSUPPORTED
         if has_location(item.command):
@@ -199,6 +206,9 @@ class FenceStore(PlanStore):
             return M.MAV_MISSION_UNSUPPORTED
         if item.frame not in GLOBAL_FRAMES:
             return M.MAV_MISSION_UNSUPPORTED_FRAME
+        values = check_values(item)  # a circle of radius NaN or inf, a vertex count NaN
+        if values != ACCEPTED:
+            return values
         if item.command in VERTEX_COMMANDS and not item.param1 <= MAX_POLYGON_VERTICES:
             return M.MAV_MISSION_INVALID_PARAM1
         return ACCEPTED
@@ -250,6 +260,9 @@ class RallyStore(PlanStore):
             return M.MAV_MISSION_UNSUPPORTED
         if item.frame not in GLOBAL_FRAMES:
             return M.MAV_MISSION_UNSUPPORTED_FRAME
+        values = check_values(item)
+        if values != ACCEPTED:
+            return values
         if not lat_ok(item.x):
             return M.MAV_MISSION_INVALID_PARAM5_X
         if not lon_ok(item.y):

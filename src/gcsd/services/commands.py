@@ -2,9 +2,13 @@
 
 COMMAND_LONG is turned into the same CommandRequest as COMMAND_INT (frame
 GLOBAL_RELATIVE_ALT; x/y are params 5/6, scaled by 1e7 for the commands that carry a location),
-as ArduPilot does. A handler returns a MAV_RESULT; the ACK (progress 0, targeted at the sender)
-is sent after the handler, so whatever the handler sends (MESSAGE_INTERVAL) precedes it. Unknown
-commands get UNSUPPORTED; a handler that raises gets FAILED and the error is logged; nothing is
+as ArduPilot does (a NaN latitude or longitude becomes 0 when both are NaN, "not given"; one
+NaN alone stays NaN and is refused). A handler returns a MAV_RESULT; the ACK (progress 0,
+targeted at the sender) is sent after the handler, so whatever the handler sends
+(MESSAGE_INTERVAL) precedes it. Unknown commands get UNSUPPORTED; before a handler runs, the
+parameters pass the edge check of `command_rules` (NaN, infinity, out-of-range values and bad
+positions refused with DENIED or FAILED, unused parameters zeroed), so no handler sees a value
+it cannot honour; a handler that raises gets FAILED and the error is logged; nothing is
 de-duplicated by `confirmation` (a resent command is executed again, as in ArduPilot).
 """
 
@@ -12,12 +16,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from . import Incoming, Service
+from .command_rules import RULES, STRICT, check
 
 log = structlog.get_logger("gcsd.commands")
 
@@ -60,8 +65,9 @@ class CommandRequest:
         return self.params[3]
 
 
-def _scale_e7(v: float) -> int:
-    return 0 if math.isnan(v) else int(v * 1e7)
+def _scale_e7(v: float) -> float:
+    """Degrees to degE7; NaN and infinity stay as they are (for the edge check to refuse)."""
+    return v * 1e7 if not math.isfinite(v) else int(v * 1e7)
 
 
 class CommandService(Service):
@@ -71,6 +77,7 @@ class CommandService(Service):
         self.node = node
         self.table = table
         self.unsupported = 0
+        self.refused = 0  # commands refused by the edge check
 
     def handle_COMMAND_LONG(self, inc: Incoming) -> None:
         m = inc.msg
@@ -82,6 +89,8 @@ class CommandService(Service):
                 self._ack(inc, cmd, M.MAV_RESULT_UNSUPPORTED)  # needs COMMAND_INT to say its frame
                 return
             frame = IMPLIED_FRAME[cmd]
+            if math.isnan(x) and math.isnan(y):
+                x = y = 0.0  # neither given: ArduPilot's 0, 0 ("here" / "none")
             x, y = _scale_e7(x), _scale_e7(y)
         self._run(CommandRequest(cmd, (m.param1, m.param2, m.param3, m.param4), x, y, m.param7, frame, False, inc))
 
@@ -93,13 +102,20 @@ class CommandService(Service):
         handler = self.table.get(req.command)
         if handler is None:
             self.unsupported += 1
-            result = M.MAV_RESULT_UNSUPPORTED
-        else:
-            try:
-                result = handler(req)
-            except Exception:
-                log.exception("command_failed", command=req.command, channel=req.inc.channel.name)
-                result = M.MAV_RESULT_FAILED
+            self._ack(req.inc, req.command, M.MAV_RESULT_UNSUPPORTED)
+            return
+        checked = check(RULES.get(req.command, STRICT), (*req.params, req.x, req.y, req.z))
+        if isinstance(checked, int):
+            self.refused += 1
+            self._ack(req.inc, req.command, checked)
+            return
+        p1, p2, p3, p4, x, y, z = checked
+        req = replace(req, params=(p1, p2, p3, p4), x=x, y=y, z=z)
+        try:
+            result = handler(req)
+        except Exception:
+            log.exception("command_failed", command=req.command, channel=req.inc.channel.name)
+            result = M.MAV_RESULT_FAILED
         self._ack(req.inc, req.command, result)
 
     def _ack(self, inc: Incoming, command: int, result: int) -> None:

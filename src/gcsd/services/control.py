@@ -9,6 +9,8 @@ every link so ground stations see it without waiting.
 
 from __future__ import annotations
 
+import math
+
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from . import Incoming, Service
@@ -44,7 +46,7 @@ class ControlService(Service):
 
     # --- commands --------------------------------------------------------------------------
     def arm_disarm(self, req: CommandRequest) -> int:
-        forced = int(req.param2) in FORCE_MAGIC
+        forced = math.isfinite(req.param2) and int(req.param2) in FORCE_MAGIC  # NaN: not forced
         if req.param1 == 1:
             return self._arm(forced)
         if req.param1 == 0:

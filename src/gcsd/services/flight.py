@@ -36,7 +36,24 @@ RELATIVE_FRAMES = frozenset({
 POSITION_IGNORED = 0b111
 VELOCITY_IGNORED = 0b111000
 YAW_IGNORED = 1024
+YAW_RATE_IGNORED = 2048
 RC_IGNORE = 65535
+# SET_POSITION_TARGET_* fields in type_mask bit order (bit n set: field n ignored); bit 9 is a flag
+LOCAL_FIELDS = ("x", "y", "z", "vx", "vy", "vz", "afx", "afy", "afz")
+GLOBAL_FIELDS = ("lat_int", "lon_int", "alt", "vx", "vy", "vz", "afx", "afy", "afz")
+
+
+def _target_ok(m, fields: tuple[str, ...]) -> bool:
+    """Every field the type_mask says is used is a finite number (ignored fields may hold anything).
+
+    A target with a NaN or infinite value it uses is dropped whole, as if never sent: the
+    vehicle keeps its last target (ArduPilot's check_latlng failure; NaN has no meaning here)."""
+    used = [getattr(m, name) for bit, name in enumerate(fields) if not m.type_mask & (1 << bit)]
+    if not m.type_mask & YAW_IGNORED:
+        used.append(m.yaw)
+    if not m.type_mask & YAW_RATE_IGNORED:
+        used.append(m.yaw_rate)
+    return all(math.isfinite(v) for v in used)
 
 
 def _result(ok: bool) -> int:
@@ -115,7 +132,7 @@ class FlightService(Service):
             self.ap._enter(self.node.state.mode)
         s = self.node.state
         lat, lon = (req.x / 1e7, req.y / 1e7) if (req.x or req.y) else (s.lat, s.lon)
-        alt = self._alt(req.z, req.frame) if math.isfinite(req.z) else s.alt_amsl_m
+        alt = self._alt(req.z, req.frame)  # finite: the edge check refuses a NaN altitude (ArduPilot: DENIED)
         speed = req.param1 if req.param1 > 0 else None
         return _result(self.ap.goto(lat, lon, alt, speed))
 
@@ -127,11 +144,10 @@ class FlightService(Service):
         return _result(self.ap.change_altitude(self._alt(req.param1, frame)))
 
     def set_home(self, req: CommandRequest) -> int:
+        """param1 1, or latitude and longitude 0: here (ArduPilot); else the location given."""
         s = self.node.state
-        if req.param1 >= 1:
+        if req.param1 >= 1 or not (req.x or req.y):
             return _result(self.ap.set_home(s.lat, s.lon, s.alt_amsl_m))
-        if not (req.x or req.y):
-            return FAILED
         return _result(self.ap.set_home(req.x / 1e7, req.y / 1e7, self._alt(req.z, req.frame)))
 
     def set_roi(self, req: CommandRequest) -> int:
@@ -181,7 +197,7 @@ class FlightService(Service):
 
     def handle_SET_POSITION_TARGET_GLOBAL_INT(self, inc: Incoming) -> None:
         m = inc.msg
-        if not self._for_us(inc):
+        if not self._for_us(inc) or not _target_ok(m, GLOBAL_FIELDS):
             return
         yaw = None if m.type_mask & YAW_IGNORED else math.degrees(m.yaw)
         if m.type_mask & POSITION_IGNORED != POSITION_IGNORED:
@@ -191,7 +207,7 @@ class FlightService(Service):
 
     def handle_SET_POSITION_TARGET_LOCAL_NED(self, inc: Incoming) -> None:
         m = inc.msg
-        if not self._for_us(inc):
+        if not self._for_us(inc) or not _target_ok(m, LOCAL_FIELDS):
             return
         s = self.node.state
         yaw = None if m.type_mask & YAW_IGNORED else math.degrees(m.yaw)
