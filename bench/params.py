@@ -7,10 +7,11 @@ Servers (each its own process, each answering as sysid 1 / compid 1 on a UDP por
 - ``gcsd (built-in)``: ``python -m gcsd run`` with one ``udp-server`` channel and default stream
   rates, i.e. the parameters a user gets (the shared set plus the ten SR0_* of the one channel).
 - ``gcsd (1 000)``: the same daemon started by this file (``serve-gcsd``) after wrapping
-  ``gcsd.node.base_params`` so the vehicle's ParamStore gets filler definitions ``BENCH_0000``...
-  (INT8, INT16, INT32, REAL32 in turn) up to exactly 1 000. gcsd has no other way to define more
-  parameters (a ``params_file`` only sets defined ones; at most 10 channels of SRn_*), so this is
-  a bench-only vehicle setup; the protocol code under test is unchanged.
+  ``gcsd.node.vehicle_params`` so the vehicle's ParamStore gets filler definitions ``BENCH_0000``...
+  (INT8, INT16, INT32, REAL32 in turn) up to at least 1 000. The built-in copter set is
+  ArduPilot 4.6's own (1 000 parameters with one channel: params/data/copter.tsv), so today the
+  filler adds nothing and both gcsd rows serve the real ArduCopter list; the wrapper stays for a
+  configuration with fewer.
 - ``MAVSDK param_server (1 000)``: the ``mavsdk`` package (C++ core through ctypes) as an
   AUTOPILOT component on ``udpin://127.0.0.1:PORT``, ``set_protocol(extended=False)``, serving
   the same 1 000 names and default values (``provide_param_int`` for the integer types: MAVSDK
@@ -106,12 +107,12 @@ def filler_defs(n: int, start: int = 0):
 
 
 def bench_defs(total: int = TOTAL):
-    """What ``serve-gcsd`` serves with gcsd's default configuration: the built-in set of one
-    channel with default stream rates, then filler up to ``total``."""
+    """What ``serve-gcsd`` serves with gcsd's default configuration: the copter's set with one
+    channel at default stream rates, then filler up to ``total``."""
     from gcsd.config import DEFAULT_STREAM_RATES_HZ
-    from gcsd.params import base_params
+    from gcsd.vehicles import VEHICLE_TYPES, vehicle_params
 
-    defs = base_params(1, 255, False, [dict(DEFAULT_STREAM_RATES_HZ)])
+    defs = vehicle_params(VEHICLE_TYPES["copter"], 1, 255, False, [dict(DEFAULT_STREAM_RATES_HZ)], 1.0)
     return defs + filler_defs(max(0, total - len(defs)))
 
 
@@ -120,13 +121,13 @@ def serve_gcsd(cfg: str, total: int) -> int:
     import gcsd.node
     from gcsd.cli import main
 
-    original = gcsd.node.base_params
+    original = gcsd.node.vehicle_params
 
     def padded(*args, **kwargs):
         defs = original(*args, **kwargs)
         return defs + filler_defs(max(0, total - len(defs)))
 
-    gcsd.node.base_params = padded
+    gcsd.node.vehicle_params = padded
     return main(["run", "-c", cfg])
 
 

@@ -126,7 +126,7 @@ async def test_mavsdk_mission_raw_uploads_ten_waypoints_that_are_flown_to_the_en
             await until(telemetry.armed, lambda a: not a, 30.0, "disarmed after the RTL landing")
             end = await telemetry.position()
             assert distance_m(end.latitude_deg, end.longitude_deg, home.latitude_deg, home.longitude_deg) < 1.0
-        elif vehicle == "plane":  # back home, circling at ALT_HOLD_RTL (100 m)
+        elif vehicle == "plane":  # back home, circling at RTL_ALTITUDE (100 m)
             assert distance_m(end.latitude_deg, end.longitude_deg, home.latitude_deg, home.longitude_deg) < 150.0
             assert end.relative_altitude_m > 35.0
             assert await telemetry.in_air() is True

@@ -29,7 +29,7 @@ class Rtl:
     def begin(self, s) -> None:
         settings = self.pilot.settings
         lat, lon, dest_alt = self._destination(s)
-        if settings.rtl_alt_m < 0:  # keep the current altitude (rover, blimp, ALT_HOLD_RTL -1)
+        if settings.rtl_alt_m < 0:  # keep the current altitude (rover, blimp, plane RTL_ALTITUDE -1)
             alt, self.phase = s.alt_amsl_m, RETURN
         elif settings.fixed_wing:
             alt, self.phase = max(s.home_alt_m + settings.rtl_alt_m, dest_alt), RETURN
