@@ -1,6 +1,7 @@
 """Channel transports (SPEC.md "Channels"): several clients on one UDP or TCP server, TCP and UDP
 client channels that reach out to a test-owned socket, reconnection, and the output version that
-follows the peer. Forgetting a UDP client silent for 30 s is too slow for real time: unit-tested.
+follows the peer. Forgetting a UDP client silent for 30 s is too slow for real time: it is tested
+with a float clock in tests/unit/test_channel.py.
 """
 
 from __future__ import annotations
