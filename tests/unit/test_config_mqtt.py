@@ -1,11 +1,12 @@
 """The mqtt channel's configuration keys, and the pure parts of the channel (topics, frame headers)."""
 
+from pathlib import Path
 from textwrap import dedent
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.config import ConfigError, parse_config
+from gcsd.config import ConfigError, load_config, parse_config
 from gcsd.config_mqtt import MqttConfig, parse_broker, route_capacity
 from gcsd.mqtt import Topics, frame_source, frame_target_system
 
@@ -137,3 +138,13 @@ def test_topics():
     assert t.ground_subscriptions(None) == ["gcsd/fleet1/up/+/+"]
     assert t.ground_subscriptions(frozenset({2, 1})) == ["gcsd/fleet1/up/1/+", "gcsd/fleet1/up/2/+"]
     assert t.vehicle_subscriptions({5}) == ["gcsd/fleet1/down/all", "gcsd/fleet1/down/5"]
+
+
+FLEET = Path(__file__).resolve().parents[2] / "sitl" / "fleet"
+
+
+@pytest.mark.parametrize("name", ["vehicles.yaml", "ground.yaml"])
+def test_fleet_configurations_are_valid(name):
+    config = load_config(FLEET / name)
+    [mqtt] = [c.mqtt for c in config.channels if c.type == "mqtt"]
+    assert mqtt.topic == "gcsd/fleet1" and mqtt.role == ("ground" if name == "ground.yaml" else "vehicle")
