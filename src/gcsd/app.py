@@ -1,17 +1,24 @@
 """The daemon's lifetime: build the GCS, serve until SIGINT/SIGTERM, stop cleanly.
 
 A first signal asks for a clean stop (tasks cancelled, transports closed); a second one while
-stopping exits at once. Returns the process exit code: 0 clean stop, 1 failure.
+stopping exits at once. Returns the process exit code: 0 clean stop, 1 failure, 2 a bad
+configuration found before anything started: preflight.prepare (state_dir, FTP roots,
+params_file, tlog) or a ConfigError while the vehicles are built (a bad params_file line); each
+problem is one ``FILE:LINE: key.path: what`` line on stderr, as check-config prints them.
+Once every channel is open the daemon registers its control socket (control.register) so that
+`gcsd status` finds it from any directory; the registration is removed at the stop.
 """
 
 from __future__ import annotations
 
 import asyncio
 import signal
+import sys
 
 import structlog
 
-from .config import Config
+from . import control, preflight
+from .config import Config, ConfigError
 from .gcs import GCS
 from .notify import Notifier
 from .transport import ChannelStartError
@@ -36,7 +43,9 @@ async def run_daemon(config: Config) -> int:
     for signum in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(signum, on_signal, signum)
     try:
-        config.state_dir.mkdir(parents=True, exist_ok=True)
+        problems = preflight.prepare(config)
+        if problems:
+            raise ConfigError(problems)
         gcs = GCS(config)
         log.info(
             "daemon_started", vehicle=config.vehicle.type, sysid=config.vehicle.sysid,
@@ -44,6 +53,10 @@ async def run_daemon(config: Config) -> int:
         )
         notifier = Notifier()
         await _run_with_notify(gcs, stop, notifier)
+    except ConfigError as exc:
+        for problem in exc.problems:
+            print(problem, file=sys.stderr)
+        return 2
     except ChannelStartError as exc:  # a taken port: one clear line, no traceback
         log.error("daemon_failed", error=str(exc))
         return 1
@@ -62,6 +75,7 @@ async def _run_with_notify(gcs: GCS, stop: asyncio.Event, notifier: Notifier) ->
 
     async def tell_systemd() -> None:
         await gcs.all_open.wait()
+        registration.append(control.register(gcs.config))
         notifier.ready(f"{len(gcs.channels)} channels open")
         log.info("daemon_ready", channels=len(gcs.channels), notify=notifier.enabled)
         interval = notifier.watchdog_interval_s
@@ -69,9 +83,12 @@ async def _run_with_notify(gcs: GCS, stop: asyncio.Event, notifier: Notifier) ->
             notifier.watchdog()
             await asyncio.sleep(interval)
 
+    registration: list[control.Registration] = []
     helper = asyncio.create_task(tell_systemd())
     try:
         await gcs.run(stop)
     finally:
         helper.cancel()
+        for entry in registration:
+            entry.remove()
         notifier.stopping()

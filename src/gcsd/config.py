@@ -10,7 +10,20 @@ suggested). A section or list that is null takes its default; a null scalar is a
 its default is null. Text values (names, addresses, paths, the key) are read from their source
 text, so ``address: 1:30`` is not YAML 1.1's sexagesimal 90. Defaults that depend on other keys
 (``vehicle.compid``: 191 for a companion, else 1; a serial channel's ``bandwidth``: baud // 10)
-are resolved by the dataclasses themselves. Relative paths stay relative to the working directory.
+are resolved by the dataclasses themselves. Relative paths stay relative to the working directory
+(the daemon's, which is what a user who types ``gcsd -c sitl/plane.yaml`` expects; `gcsd status`
+finds a daemon started elsewhere through its runtime registration, see control.py).
+
+Hostile or broken files are refused, never a traceback: at most MAX_CONFIG_BYTES are read,
+nesting deeper than MAX_DEPTH is refused (checked on the event stream, before the recursive
+composer runs), aliases only ever reach the schema's few known keys, and a NUL byte in a path
+is a problem. Two channels that would share a listening port or target (a UDP/TCP server
+bound to the same or an overlapping address, two clients to the same address, two users of one
+serial device) are refused: the second bind would fail or the first would go deaf.
+`ftp.root` must be a directory *under* state_dir: "." would hand signing.key to any FTP client.
+
+`Config.source` keeps the file name and the line of every key (not compared), so checks made
+later against the filesystem (preflight.py) report ``FILE:LINE: key.path: what`` too.
 """
 
 from __future__ import annotations
@@ -19,7 +32,7 @@ import difflib
 import os
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path, PurePath
 from types import MappingProxyType
 
@@ -47,6 +60,11 @@ COMPANION_COMPID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
 SIGNING_KEY_HEX_CHARS = 64
 MAX_MISSION_ITEMS = 65535  # MISSION_COUNT.count is a uint16
 MIN_MISSION_RETRY_MS, MAX_MISSION_RETRY_MS = 50, 5000
+DEFAULT_MAX_PEERS, MAX_MAX_PEERS = 8, 64  # ground stations one udp-server/tcp-server serves at once
+MAX_CONFIG_BYTES = 1024 * 1024  # a configuration is a few KB; /dev/zero or a log file is refused
+MAX_DEPTH = 32  # the schema needs 4; the composer recurses, so depth is checked before it runs
+_SERVER_TYPES = ("udp-server", "tcp-server")
+_WILDCARD_HOSTS = ("0.0.0.0", "::", "*")
 
 
 @dataclass(frozen=True)
@@ -108,6 +126,7 @@ class ChannelConfig:
     options: frozenset[str] = frozenset()
     private: bool = False
     bandwidth: int | None = None  # bytes/s; None is unlimited, except serial: it resolves to baud // 10
+    max_peers: int = DEFAULT_MAX_PEERS  # udp-server/tcp-server: ground stations served at once
     mqtt: MqttConfig | None = None  # type mqtt: broker, topic, role, ... (config_mqtt.py)
 
     def __post_init__(self) -> None:
@@ -135,6 +154,24 @@ class LogConfig:
 
 
 @dataclass(frozen=True)
+class Source:
+    """Where a configuration came from: the file and the line of each key path (for messages)."""
+
+    file: str | None = None  # None: the built-in default
+    lines: Mapping[str, int] = field(default_factory=lambda: MappingProxyType({}))
+
+    def where(self, path: str) -> str:
+        """``FILE:LINE: key.path`` for a key of this configuration (the nearest enclosing key's
+        line when the key itself is absent: it took its default)."""
+        if self.file is None:
+            return f"(built-in default configuration): {path}"
+        probe = path
+        while probe and probe not in self.lines:
+            probe = probe.rpartition(".")[0] if "." in probe else probe.rpartition("[")[0]
+        return f"{self.file}:{self.lines.get(probe, 1)}: {path}"
+
+
+@dataclass(frozen=True)
 class Config:
     vehicle: VehicleConfig = VehicleConfig()
     state_dir: Path = Path("./gcsd-state")
@@ -148,6 +185,7 @@ class Config:
     )
     log: LogConfig = LogConfig()
     serial_control: tuple[SerialControlPort, ...] = ()
+    source: Source = field(default=Source(), compare=False, repr=False)
 
 
 class ConfigError(Exception):
@@ -165,28 +203,56 @@ def default_config() -> Config:
 def load_config(path: str | os.PathLike) -> Config:
     filename = os.fsdecode(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+        with open(path, "rb") as file:  # bounded: /dev/zero or a huge file must not eat the memory
+            raw = file.read(MAX_CONFIG_BYTES + 1)
+    except (OSError, ValueError) as exc:  # ValueError: a NUL byte in the file name
         raise ConfigError([f"{filename}: cannot read: {getattr(exc, 'strerror', None) or exc}"]) from None
+    if len(raw) > MAX_CONFIG_BYTES:
+        raise ConfigError([f"{filename}:1: the file is larger than {MAX_CONFIG_BYTES} bytes"])
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise ConfigError([f"{filename}:{line}: invalid UTF-8 (byte {raw[exc.start]:#04x})"]) from None
     return parse_config(text, filename)
 
 
 def parse_config(text: str, filename: str = "<config>") -> Config:
     try:
+        _check_depth(text, filename)
         root = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
         line = mark.line + 1 if mark else 1
         what = getattr(exc, "problem", None) or exc
+        context = getattr(exc, "context", None)
+        if context and str(what).startswith("but "):  # "expected a single document ..., but found another"
+            what = f"{context}, {what}"
         raise ConfigError([f"{filename}:{line}: invalid YAML: {what}"]) from None
+    except RecursionError:  # not reached after _check_depth; kept so no input can give a traceback
+        raise ConfigError([f"{filename}:1: invalid YAML: nested too deeply"]) from None
     if root is not None and not _is_null(root) and not isinstance(root, MappingNode):
-        raise ConfigError([f"{filename}:{_line(root)}: expected a mapping of sections at the top level, "
-                           f"got {_describe(root)}"])
+        where = f"{filename}:{_line(root)}"
+        raise ConfigError([f"{where}: expected a mapping of sections at the top level, got {_describe(root)}"])
     reader = _Reader(filename)
     config = _config(reader, reader.section(_Field(root, ""), _TOP_KEYS))
     if reader.problems:
         raise ConfigError([message for _, message in sorted(reader.problems, key=lambda p: p[0])])
-    return config
+    return replace(config, source=Source(filename, MappingProxyType(reader.lines)))
+
+
+def _check_depth(text: str, filename: str) -> None:
+    """Refuse nesting deeper than MAX_DEPTH from PyYAML's event stream (its parser is iterative;
+    its composer, which builds the node tree, recurses and would overflow the stack)."""
+    depth = 0
+    for event in yaml.parse(text, Loader=yaml.SafeLoader):
+        if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+            depth += 1
+            if depth > MAX_DEPTH:
+                line = event.start_mark.line + 1
+                raise ConfigError([f"{filename}:{line}: invalid YAML: nested more than {MAX_DEPTH} levels deep"])
+        elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+            depth -= 1
 
 
 # --- the schema, one function per section -------------------------------------------------------
@@ -197,20 +263,21 @@ SERIAL_CONTROL_PORTS = ("telem1", "telem2", "gps1", "gps2", *(f"serial{n}" for n
 _VEHICLE_KEYS = ("type", "sysid", "compid", "count", "home", "speedup")
 _MISSION_KEYS = ("max_items", "max_fence", "max_rally", "retry_ms")
 _CHANNEL_KEYS = ("name", "type", "address", "device", "baud", "mavlink", "streams", "options",
-                 "private", "bandwidth", *MQTT_KEYS)
+                 "private", "bandwidth", "max_peers", *MQTT_KEYS)
 _NETWORK_TYPES = tuple(t for t in CHANNEL_TYPES if t not in ("serial", "mqtt"))
 _SIGNING_KEY = re.compile(f"[0-9a-fA-F]{{{SIGNING_KEY_HEX_CHARS}}}")
-_ADDRESS = re.compile(r"(?:\[(?P<ipv6>[^\]]+)\]|(?P<host>[^:\s\[\]]+)):(?P<port>[0-9]{1,5})", re.ASCII)
+_ADDRESS = re.compile(r"(?:\[(?P<ipv6>[^\]\x00-\x1f]+)\]|(?P<host>[^:\s\[\]\x00-\x1f]+)):(?P<port>[0-9]{1,5})",
+                      re.ASCII)
 
 
 def _config(r: _Reader, top: _Section) -> Config:
     ftp = r.section(top["ftp"], ("root", "max_file_bytes"))
     log = r.section(top["log"], ("level", "format", "tlog"))
     gcs = r.section(top["gcs"], ("sysid", "enforce_sysid"))
-    params_file = r.text(top["params_file"], None, nullable=True)
+    params_file = r.path(top["params_file"], None, nullable=True)
     return Config(
         vehicle=_vehicle(r, r.section(top["vehicle"], _VEHICLE_KEYS)),
-        state_dir=Path(r.text(top["state_dir"], "./gcsd-state")),
+        state_dir=Path(r.path(top["state_dir"], "./gcsd-state")),
         params_file=None if params_file is None else Path(params_file),
         gcs=GcsConfig(sysid=r.integer(gcs["sysid"], 255, 1, 255),
                       enforce_sysid=r.boolean(gcs["enforce_sysid"], False)),
@@ -222,7 +289,7 @@ def _config(r: _Reader, top: _Section) -> Config:
         channels=_channels(r, top["channels"]),
         log=LogConfig(level=r.choice(log["level"], "info", LOG_LEVELS),
                       format=r.choice(log["format"], "console", LOG_FORMATS),
-                      tlog=r.text(log["tlog"], None, nullable=True)),
+                      tlog=r.path(log["tlog"], None, nullable=True)),
         serial_control=_serial_control(r, top["serial_control"]),
     )
 
@@ -239,7 +306,7 @@ def _serial_control(r: _Reader, f: _Field) -> tuple[SerialControlPort, ...]:
         if port and port in seen:
             r.problem(c["port"], f"duplicate serial_control port {port!r}")
         seen.add(port)
-        ports.append(SerialControlPort(port=port, device=r.text(c["device"], ""), baud=r.integer(c["baud"], 115200, 1)))
+        ports.append(SerialControlPort(port=port, device=r.path(c["device"], ""), baud=r.integer(c["baud"], 115200, 1)))
     return tuple(p for p in ports if p.port and p.device)
 
 
@@ -272,9 +339,13 @@ def _mission(r: _Reader, m: _Section) -> MissionConfig:
 
 
 def _ftp_root(r: _Reader, f: _Field) -> str:
-    root = PurePath(r.text(f, "ftp"))
+    root = PurePath(r.path(f, "ftp"))
     if root.is_absolute() or ".." in root.parts:
         return r.reject(f, "a path relative to state_dir without '..'", "ftp")
+    if not root.parts:  # ".", "./": FTP clients could read signing.key, mav.parm and the plans
+        r.problem(f, "must be a directory under state_dir, not state_dir itself "
+                     "(FTP clients could read the signing key and the saved parameters)")
+        return "ftp"
     return str(root)
 
 
@@ -298,7 +369,9 @@ def _channels(r: _Reader, f: _Field) -> tuple[ChannelConfig, ...]:
         r.problem(f, f"expected 1 to {MAX_CHANNELS} channels (SR0_ .. SR9_), got {len(items)}")
     first_index_by_name: dict[str, int] = {}
     channels = []
+    sections: list[_Section] = []
     for index, item in enumerate(items):
+        r.lines.setdefault(f"{f.path}[{index}]", _line(item))
         section = r.section(_Field(item, f"{f.path}[{index}]"), _CHANNEL_KEYS)
         channel = _channel(r, section)
         if channel.name and channel.name in first_index_by_name:
@@ -306,7 +379,41 @@ def _channels(r: _Reader, f: _Field) -> tuple[ChannelConfig, ...]:
             r.problem(section["name"], f"duplicate channel name {channel.name!r} (also {first})")
         first_index_by_name.setdefault(channel.name, index)
         channels.append(channel)
+        sections.append(section)
+    _check_endpoints(r, channels, sections)
     return tuple(channels)
+
+
+def _check_endpoints(r: _Reader, channels: list[ChannelConfig], sections: list[_Section]) -> None:
+    """Two channels must not share a listening port, a target or a serial device: the second
+    server's bind fails (or, with SO_REUSEADDR semantics, the first one goes deaf), two clients
+    to one address send everything twice, two readers of one device split its bytes."""
+    seen: list[tuple[int, ChannelConfig]] = []
+    for index, (channel, section) in enumerate(zip(channels, sections)):
+        for first, other in seen:
+            clash = _clash(channel, other)
+            if clash:
+                key = "device" if channel.type == "serial" else "address"
+                r.problem(section[key], f"{clash} channels[{first}] ({other.name})")
+                break
+        seen.append((index, channel))
+
+
+def _clash(a: ChannelConfig, b: ChannelConfig) -> str | None:
+    if a.type == "serial" or b.type == "serial":
+        same = a.type == b.type == "serial" and a.device and os.path.normpath(a.device) == os.path.normpath(b.device)
+        return f"serial device {a.device} is already used by" if same else None
+    if a.address is None or b.address is None:
+        return None
+    (host_a, port_a), (host_b, port_b) = a.address, b.address
+    if a.type in _SERVER_TYPES and b.type in _SERVER_TYPES:
+        same_protocol = a.type[:3] == b.type[:3]  # a UDP and a TCP server may share a port number
+        overlap = host_a == host_b or host_a in _WILDCARD_HOSTS or host_b in _WILDCARD_HOSTS
+        if same_protocol and port_a == port_b != 0 and overlap:
+            return f"{a.type[:3].upper()} port {port_a} on {host_a} is already bound by"
+    elif a.type == b.type and a.address == b.address:
+        return f"{host_a}:{port_a} is already the address of"
+    return None
 
 
 def _channel(r: _Reader, c: _Section) -> ChannelConfig:
@@ -326,9 +433,11 @@ def _channel(r: _Reader, c: _Section) -> ChannelConfig:
         if key in c and network:
             r.problem(c[key], "only used by serial channels")
     if "device" in c:
-        device = r.text(c["device"], None)
+        device = r.path(c["device"], None)
     elif serial:
         r.problem(c["device"], "required for type serial")
+    if "max_peers" in c and channel_type not in _SERVER_TYPES:
+        r.problem(c["max_peers"], "only used by udp-server and tcp-server channels")
     streams = r.section(c["streams"], STREAM_NAMES)
     return ChannelConfig(
         name=r.text(c["name"], ""), type=channel_type, address=address, device=device,
@@ -339,6 +448,7 @@ def _channel(r: _Reader, c: _Section) -> ChannelConfig:
         options=frozenset(r.choice(o, "", CHANNEL_OPTIONS) for o in r.sequence(c["options"])) - {""},
         private=r.boolean(c["private"], False),
         bandwidth=r.integer(c["bandwidth"], None, 1, nullable=True),
+        max_peers=r.integer(c["max_peers"], DEFAULT_MAX_PEERS, 1, MAX_MAX_PEERS),
         mqtt=read_mqtt(r, c, channel_type),
     )
 
@@ -388,6 +498,7 @@ class _Reader:
     def __init__(self, filename: str) -> None:
         self.filename = filename
         self.problems: list[tuple[int, str]] = []
+        self.lines: dict[str, int] = {}  # key path -> line, for Config.source
         self._constructor = yaml.constructor.SafeConstructor()
 
     def problem(self, f: _Field, message: str) -> None:
@@ -408,6 +519,7 @@ class _Reader:
         for key_node, value_node in f.node.value:
             key = key_node.value if isinstance(key_node, ScalarNode) else "?"
             key_field = _Field(key_node, f"{f.path}.{key}" if f.path else key)
+            self.lines.setdefault(key_field.path, _line(key_node))
             if key not in known:
                 self.problem(key_field, _unknown_key(key, known))
             elif key in nodes:
@@ -421,7 +533,10 @@ class _Reader:
             return []
         if not isinstance(f.node, SequenceNode):
             return self.reject(f, "a list", [])
-        return [_Field(item, f"{f.path}[{i}]") for i, item in enumerate(f.node.value)]
+        items = [_Field(item, f"{f.path}[{i}]") for i, item in enumerate(f.node.value)]
+        for item in items:
+            self.lines.setdefault(item.path, _line(item.node))
+        return items
 
     def scalar(self, node: Node):
         if not isinstance(node, ScalarNode):
@@ -460,6 +575,14 @@ class _Reader:
         if not isinstance(f.node, ScalarNode) or _is_null(f.node) or not f.node.value:
             return self.reject(f, "a non-empty string" + (" or null" if nullable else ""), default)
         return f.node.value
+
+    def path(self, f: _Field, default, *, nullable: bool = False):
+        """A file or directory name: text without NUL bytes (no system call can take one)."""
+        value = self.text(f, default, nullable=nullable)
+        if isinstance(value, str) and "\0" in value:
+            self.problem(f, "a path cannot contain a NUL byte")
+            return default
+        return value
 
     def choice(self, f: _Field, default: str, choices: tuple[str, ...]) -> str:
         value = self.text(f, None)

@@ -29,7 +29,8 @@ from .clock import Clock
 from .codec import Frame
 from .config import Config
 from .link import Link
-from .params import ParamStore, base_params
+from .params import ParamStore
+from .persist import WriteBehind
 from .services import Incoming
 from .services.commands import CommandService
 from .services.control import ControlService
@@ -45,7 +46,6 @@ from .vehicles import VehicleType, prearm_failures, vehicle_params
 log = structlog.get_logger("gcsd.node")
 
 ALWAYS_ACCEPTED = frozenset({"RADIO_STATUS", "RADIO"})
-BANNER = ("gcsd 0.1.0 (ArduPilot-compatible MAVLink vehicle)",)
 
 
 class VehicleNode:
@@ -66,20 +66,24 @@ class VehicleNode:
         self.clock = clock
         self.channels = channels
         self.state_dir = _vehicle_state_dir(config, index)
-        self.params = ParamStore(
-            base_params(
-                vcfg.sysid + index, config.gcs.sysid, config.gcs.enforce_sysid,
-                [dict(ch.config.streams) for ch in channels],
-            ) + list(vehicle_params(vehicle, vcfg.speedup))
-        )
-        self.param_service = ParamService(self, self.params, self.state_dir / "mav.parm" if self.state_dir else None)
+        self.params = ParamStore(vehicle_params(  # ArduPilot's set for the vehicle type (gcsd.params.defs)
+            vehicle, vcfg.sysid + index, config.gcs.sysid, config.gcs.enforce_sysid,
+            [dict(ch.config.streams) for ch in channels], vcfg.speedup,
+        ))
+        self.param_service = ParamService(self, self.params, self.state_dir / "mav.parm" if self.state_dir else None,
+                                          clock.now())
         self.param_service.load(config.params_file)
+        # write-behind of mav.parm: coalesced, on a worker thread, flushed by close()
+        self.param_writer = WriteBehind(self.param_service.save_path, self.param_service, clock.now)
+        self.param_service.on_dirty = self.param_writer.kick
         self.params.set("STAT_BOOTCNT", self.params.get("STAT_BOOTCNT") + 1, force=True)
         self.sysid = int(self.params.get("SYSID_THISMAV"))
         self.compid = vcfg.compid
+        self.gcs_sysid_config, self.enforce_config = config.gcs.sysid, config.gcs.enforce_sysid
         self.min_interval_ms = max(1, 1250 // int(self.params.get("SCHED_LOOP_RATE")))
         now = clock.now()
-        self.state = initial_state(vehicle, vcfg.home, index, float(self.params.get("BATT_CAPACITY")))
+        capacity = float(self.params.get("BATT_CAPACITY")) if "BATT_CAPACITY" in self.params else 0.0
+        self.state = initial_state(vehicle, vcfg.home, index, capacity)
         self.sim = Autopilot(self, backend, now, vcfg.speedup)  # the vehicle: autopilot over a backend
         self.statustext = StatusTextQueue()
         self.errors = errors if errors is not None else ErrorCounts()
@@ -123,10 +127,13 @@ class VehicleNode:
         for link in self.links:
             for stream in STREAM_NAMES:
                 name = f"SR{link.channel.index}_{PARAM_SUFFIX[stream]}"
+                if name not in params:  # a stream the vehicle type has no SRn_ parameter for
+                    link.set_stream_rate(stream, link.channel.config.streams[stream], now)
+                    continue
                 link.set_stream_rate(stream, params.get(name), now)
                 params.on_change(name, lambda _n, v, link=link, stream=stream: link.set_stream_rate(stream, v, self.clock.now()))
-        self.gcs_sysid = int(params.get("SYSID_MYGCS"))
-        self.enforce_gcs_sysid = bool(params.get("SYSID_ENFORCE"))
+        self.gcs_sysid = int(params.get("SYSID_MYGCS")) if "SYSID_MYGCS" in params else self.gcs_sysid_config
+        self.enforce_gcs_sysid = bool(params.get("SYSID_ENFORCE")) if "SYSID_ENFORCE" in params else self.enforce_config
         params.on_change("SYSID_MYGCS", lambda _n, v: setattr(self, "gcs_sysid", int(v)))
         params.on_change("SYSID_ENFORCE", lambda _n, v: setattr(self, "enforce_gcs_sysid", bool(v)))
         params.on_change("BATT_CAPACITY", lambda _n, v: setattr(self.state, "capacity_mah", float(v)))
@@ -146,11 +153,8 @@ class VehicleNode:
                     log.exception("shutdown_failed", service=type(service).__name__)
 
     def close(self) -> None:
-        """Flush state at a clean stop."""
-        try:
-            self.param_service.save()
-        except OSError as exc:
-            log.error("params_save_failed", error=str(exc))
+        """Flush state at a clean stop (waits for a parameter write in flight, writes the rest)."""
+        self.param_writer.flush()
 
     # --- identity and time -----------------------------------------------------------------
     def capabilities(self) -> int:
@@ -211,7 +215,7 @@ class VehicleNode:
             self._wake(self.channels[index])
 
     def send_banner(self) -> None:
-        for line in BANNER:
+        for line in self.vehicle.banner(self.params.get):  # as ArduPilot's (gcsd.vehicles.firmware)
             self.send_text(M.MAV_SEVERITY_INFO, line)
 
     def push_heartbeat(self) -> None:

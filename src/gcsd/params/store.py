@@ -68,6 +68,15 @@ def to_type(ptype: int, value: float) -> float | int:
     return int(max(lo, min(hi, nudged)))
 
 
+def fits_real32(value: float) -> bool:
+    """A finite double that rounds to a finite single-precision float (|v| up to ~3.4028235e38)."""
+    try:
+        struct.pack("<f", value)
+    except OverflowError:
+        return False
+    return True
+
+
 def as_float(value: float) -> float:
     """The C cast a PARAM_VALUE carries."""
     return struct.unpack("<f", struct.pack("<f", float(value)))[0]
@@ -75,7 +84,7 @@ def as_float(value: float) -> float:
 
 class ParamStore:
     def __init__(self, defs: Iterable[ParamDef]) -> None:
-        ordered = sorted(defs, key=lambda d: d.name)
+        ordered = list(defs)  # ArduPilot's index order, as the definitions come (gcsd.params.defs)
         names = [d.name for d in ordered]
         if len(set(names)) != len(names):
             raise ValueError("duplicate parameter names")
@@ -120,7 +129,8 @@ class ParamStore:
         self._listeners.setdefault(name, []).append(fn)
 
     def set(self, name: str, value: float, force: bool = False) -> SetResult:
-        """Set from a ground station (force=True: from our own code, read-only allowed)."""
+        """Set from a ground station (force=True: from our own code: read-only allowed, and the
+        documented range not applied, as ArduPilot's calibrations write what they measured)."""
         index = self._index.get(name)
         if index is None:
             return SetResult.UNKNOWN
@@ -129,9 +139,11 @@ class ParamStore:
         d = self._defs[index]
         if d.read_only and not force:
             return SetResult.READ_ONLY
-        typed = to_type(d.ptype, value)
-        if (d.min is not None and typed < d.min) or (d.max is not None and typed > d.max):
+        if d.ptype == REAL32 and not fits_real32(value):  # from a file or a double, never from the wire
             return SetResult.OUT_OF_RANGE
+        typed = to_type(d.ptype, value)
+        if not force and ((d.min is not None and typed < d.min) or (d.max is not None and typed > d.max)):
+            return SetResult.OUT_OF_RANGE  # our own writes (calibration results) are not held to the docs
         if typed == self._values[index]:
             return SetResult.UNCHANGED
         self._values[index] = typed

@@ -12,52 +12,74 @@
   outside the documented range are refused with a STATUSTEXT and the old value sent back to
   the requester. A change is saved and confirmed with PARAM_VALUE on every active, non-private
   channel. (PARAM_VALUE carries the parameter's real index; ArduPilot sends 65535 there.)
-- Persistence: `mav.parm` in the vehicle's state directory holds the values that differ from
-  their defaults, written atomically after every change. At start: defaults, then
-  `params_file`, then the saved file. Unreadable lines are logged with their line numbers and
-  those parameters keep their defaults; a damaged saved file is kept as `mav.parm.bad` before
-  it is ever overwritten.
+- Persistence, write-behind: `mav.parm` in the vehicle's state directory holds the values that
+  differ from their defaults. A change only marks the service dirty (`mark_dirty`, and the
+  `on_dirty` hook tells the I/O adapter, gcsd.persist.WriteBehind). The file is due at
+  `persist_deadline()`: at once after a quiet second, else one PERSIST_INTERVAL_S after the
+  previous write, so a burst of 1 000 PARAM_SETs costs two writes (the first change, then the
+  rest), and a single change is on disk within milliseconds. `take_persist(now)` renders the
+  text on the caller's thread (a consistent snapshot) and the adapter writes it atomically on
+  a worker thread; a clean stop flushes what is left. A failed write is retried a second
+  later and reported once by STATUSTEXT. REAL32 values are written so they read back bit-exact
+  (parmfile.format_real32). No clock is read here: `now` always comes from the caller.
+- At start: defaults, then `params_file`, then the saved file. A problem in `params_file` (a
+  bad line, an unknown name, a value out of its type's or its own range, NaN) is a bad
+  configuration: `load` raises ConfigError with a ``FILE:LINE: NAME: what`` line for each, and
+  the daemon does not start (exit 2) rather than run with half of an operator's settings. The
+  daemon's own saved file is state, not configuration: unreadable lines there are logged with
+  their line numbers, those parameters keep their defaults, and the damaged file is kept as
+  `mav.parm.bad` before it is ever overwritten.
 """
 
 from __future__ import annotations
 
-import time
+import math
+from collections.abc import Callable
 from pathlib import Path
 
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from ..atomic import write_atomic
-from ..params import ParamEntry, ParamStore, SetResult, as_float
-from ..params.parmfile import format_parm, read_parm
+from ..config import ConfigError
+from ..params import ParamEntry, ParamStore, SetResult, as_float, to_type
+from ..params.parmfile import format_parm, read_parm, read_parm_lines
+from ..params.store import REAL32, TYPE_RANGE, fits_real32
 from . import Incoming, Service
 
 log = structlog.get_logger("gcsd.params")
 
 BURST = 100  # PARAM_VALUEs per send pass on a link with room to spare
 PARAM_VALUE_BYTES = 37  # MAVLink2 PARAM_VALUE: 12 bytes of framing + 25 of payload
+PERSIST_INTERVAL_S = 1.0  # at most one write of mav.parm per second
 
 
 class ParamService(Service):
     capabilities = M.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
 
-    def __init__(self, node, store: ParamStore, save_path: Path | None) -> None:
+    def __init__(self, node, store: ParamStore, save_path: Path | None, now: float = 0.0) -> None:
         self.node = node
         self.store = store
         self.save_path = save_path
         self._lists: dict[tuple[int, int, int], int] = {}  # requester -> next index
-        self._started_s = time.monotonic()
+        self._started_s = now
         self._runtime_base = 0
+        self._dirty = False
+        self._last_write_s = -math.inf
+        self._failing = False  # the last write failed (reported once until one succeeds)
+        self.on_dirty: Callable[[], None] = lambda: None  # the I/O adapter's wake-up (persist.py)
 
-    # --- loading and saving ----------------------------------------------------------------
+    # --- loading -----------------------------------------------------------------------------
     def load(self, params_file: Path | None) -> None:
         if params_file is not None:
+            problems = params_file_problems(self.store, params_file)
+            if problems:
+                raise ConfigError(problems)
             self._apply_file(params_file, "params_file")
-        if self.save_path is not None and self.save_path.exists():
-            if self._apply_file(self.save_path, "saved"):
-                bad = self.save_path.with_name(self.save_path.name + ".bad")
-                bad.write_bytes(self.save_path.read_bytes())
-                log.warning("params_saved_file_kept", path=str(bad))
+        saved = self.save_path
+        if saved is not None and saved.exists() and self._apply_file(saved, "saved"):
+            bad = saved.with_name(saved.name + ".bad")
+            bad.write_bytes(saved.read_bytes())
+            log.warning("params_saved_file_kept", path=str(bad))
         self._runtime_base = int(self.store.get("STAT_RUNTIME"))
 
     def _apply_file(self, path: Path, source: str) -> int:
@@ -78,18 +100,48 @@ class ParamService(Service):
         log.info("params_loaded", path=str(path), source=source, values=len(values), problems=count)
         return count
 
-    def save(self) -> None:
+    # --- write-behind persistence (the pure half; persist.WriteBehind does the I/O) ----------
+    def mark_dirty(self) -> None:
+        """Values changed: the file is due at `persist_deadline()`."""
         if self.save_path is None:
             return
-        runtime = self._runtime_base + int(time.monotonic() - self._started_s)
+        self._dirty = True
+        self.on_dirty()
+
+    save = mark_dirty  # what services call after changing parameters themselves (never raises)
+
+    def persist_deadline(self) -> float | None:
+        """When the file should next be written (None: nothing to write)."""
+        return self._last_write_s + PERSIST_INTERVAL_S if self._dirty else None
+
+    def take_persist(self, now: float, force: bool = False) -> str | None:
+        """The file's new text if a write is due at `now` (or `force`: a clean stop), else None.
+        The service is clean afterwards; `persist_failed` makes it dirty again."""
+        deadline = self.persist_deadline()
+        if deadline is None or (now < deadline and not force):
+            return None
+        runtime = self._runtime_base + int(max(0.0, now - self._started_s))
         self.store.set("STAT_RUNTIME", runtime, force=True)
-        write_atomic(self.save_path, format_parm(self.store.changed_from_default()))
+        self._dirty = False
+        self._last_write_s = now
+        return format_parm(self.store.changed_from_default())
+
+    def persist_done(self) -> None:
+        self._failing = False
+
+    def persist_failed(self, error: str) -> None:
+        """The write failed: try again a PERSIST_INTERVAL_S later; tell the ground stations once."""
+        log.error("params_save_failed", path=str(self.save_path), error=error)
+        if not self._failing:
+            self._failing = True
+            self.node.send_text(M.MAV_SEVERITY_ERROR, "Param save failed")
+        self.mark_dirty()
 
     def set_from_file(self, name: str, value: float, save: bool = True) -> bool:
         """Set a parameter uploaded as a file (FTP param.pck): no echo, read-only refused."""
         result = self.store.set(name, value)
         if result is SetResult.CHANGED and save:
-            self.save()
+            self.mark_dirty()
         return result in (SetResult.CHANGED, SetResult.UNCHANGED)
 
     # --- messages --------------------------------------------------------------------------
@@ -131,11 +183,7 @@ class ParamService(Service):
             self.node.reply(inc.channel, self._value_msg(entry))
             return
         if result is SetResult.CHANGED:
-            try:
-                self.save()
-            except OSError as exc:
-                log.error("params_save_failed", path=str(self.save_path), error=str(exc))
-                self.node.send_text(M.MAV_SEVERITY_ERROR, f"Param save failed ({name})")
+            self.mark_dirty()
             if self.store.definition(name).reboot:
                 self.node.send_text(M.MAV_SEVERITY_INFO, f"{name} takes effect at the next start")
         msg = self._value_msg(entry)
@@ -165,6 +213,37 @@ class ParamService(Service):
             self.node.link(channel).set_slow("params", False)
             return None
         return now
+
+
+def params_file_problems(store: ParamStore, path: Path) -> list[str]:
+    """Every problem of a configured params_file, as ``FILE:LINE: NAME: what`` lines."""
+    try:
+        lines, bad = read_parm_lines(path)
+    except OSError as exc:
+        return [f"{path}: cannot read: {exc.strerror or exc}"]
+    problems = [(p.line, f"{path}:{p.line}: {p.reason}" + (f": {p.text!r}" if p.text else "")) for p in bad]
+    for p in lines:
+        why = _file_value_problem(store, p.name, p.value)
+        if why:
+            problems.append((p.line, f"{path}:{p.line}: {p.name}: {why}"))
+    return [text for _, text in sorted(problems)]
+
+
+def _file_value_problem(store: ParamStore, name: str, value: float) -> str | None:
+    if name not in store:
+        return "no such parameter"
+    d = store.definition(name)
+    if d.ptype == REAL32 and not fits_real32(value):
+        return f"{value:g} is out of range for a REAL32 (a 32-bit float)"
+    if d.ptype in TYPE_RANGE and not TYPE_RANGE[d.ptype][0] <= value <= TYPE_RANGE[d.ptype][1]:
+        lo, hi = TYPE_RANGE[d.ptype]
+        return f"{value:g} is out of range for its type ({lo}..{hi})"
+    typed = to_type(d.ptype, value)  # what ParamStore.set would store, and then check
+    if (d.min is not None and typed < d.min) or (d.max is not None and typed > d.max):
+        low = "" if d.min is None else f"{d.min:g}"
+        high = "" if d.max is None else f"{d.max:g}"
+        return f"{value:g} is outside its range ({low}..{high})"
+    return None
 
 
 def _name(raw) -> str:
