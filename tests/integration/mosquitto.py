@@ -1,7 +1,7 @@
 """A real Mosquitto broker for the fleet tests (and the fleet benchmark), on a free loopback port.
 
 `Mosquitto(directory)` writes a configuration (`listener PORT 127.0.0.1`, `allow_anonymous true`,
-no persistence) and runs Debian's `mosquitto -c FILE`; `start()` returns once the port accepts
+no persistence, plus `extra` lines: TLS files, a password file) and runs Debian's `mosquitto -c FILE`; `start()` returns once the port accepts
 connections. `kill()` is SIGKILL (the broker vanishes: the clients' sockets are reset), and
 `start()` again brings it back on the same port, as a restarted broker would come back.
 `mosquitto_binary()` finds the broker (PATH, then /usr/sbin, where Debian puts it).
@@ -9,6 +9,7 @@ connections. `kill()` is SIGKILL (the broker vanishes: the clients' sockets are 
 
 from __future__ import annotations
 
+import getpass
 import os
 import shutil
 import signal
@@ -31,7 +32,7 @@ def free_tcp_port() -> int:
 
 
 class Mosquitto:
-    def __init__(self, directory: Path, port: int | None = None, extra: str = "") -> None:
+    def __init__(self, directory: Path, port: int | None = None, extra: str = "", anonymous: bool = True) -> None:
         self.binary = mosquitto_binary()
         if self.binary is None:
             raise FileNotFoundError("mosquitto is not installed (apt-get install mosquitto)")
@@ -41,7 +42,8 @@ class Mosquitto:
         self.conf = self.directory / "mosquitto.conf"
         self.conf.write_text(
             f"listener {self.port} 127.0.0.1\n"
-            "allow_anonymous true\n"
+            f"user {getpass.getuser()}\n"  # started as root it would switch to "mosquitto", who cannot read our files
+            f"allow_anonymous {'true' if anonymous else 'false'}\n"
             "persistence false\n"
             "log_dest stderr\n"
             "log_type error\n"
@@ -90,3 +92,27 @@ class Mosquitto:
 
     def alive(self) -> bool:
         return self.proc is not None and self.proc.poll() is None and os.path.exists(f"/proc/{self.proc.pid}")
+
+
+def tls_files(directory: Path) -> dict[str, Path]:
+    """A throwaway CA and a server certificate for 127.0.0.1 (openssl CLI, EC P-256, valid 1 day)."""
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    ec = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"]
+
+    def run(*argv: str) -> None:
+        subprocess.run(["openssl", *argv], cwd=d, check=True, capture_output=True, timeout=30)
+
+    run("req", "-x509", *ec, "-keyout", "ca.key", "-out", "ca.pem", "-days", "1", "-subj", "/CN=gcsd test CA")
+    run("req", *ec, "-keyout", "server.key", "-out", "server.csr", "-subj", "/CN=127.0.0.1")
+    (d / "san.ext").write_text("subjectAltName=IP:127.0.0.1\n")
+    run("x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key", "-CAcreateserial",
+        "-out", "server.pem", "-days", "1", "-extfile", "san.ext")
+    return {"ca": d / "ca.pem", "cert": d / "server.pem", "key": d / "server.key"}
+
+
+def password_file(path: Path, user: str, password: str) -> Path:
+    """A Mosquitto password file (mosquitto_passwd, hashed) with one user."""
+    subprocess.run(["mosquitto_passwd", "-b", "-c", str(path), user, password], check=True, capture_output=True,
+                   timeout=30)
+    return path

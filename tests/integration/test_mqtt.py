@@ -12,25 +12,33 @@ topics and the bytes on them are checked directly.
 3. The broker killed and restarted: both sides reconnect, telemetry resumes, no daemon stops.
 4. Signing end to end: frames signed by the ground station are verified by the vehicle, the
    vehicle's signed frames reach the ground station byte-exact (the same bytes as on the broker).
+5. mqtts:// with a CA file and username + password_file against a TLS, password-only broker; a
+   wrong password is refused (the channel's open fails, so run_channel retries).
 """
 
 from __future__ import annotations
 
+import asyncio
 import hashlib
 import os
+import shutil
 import threading
 import time
 
 import paho.mqtt.client as paho
 import pytest
+import yaml
 from paho.mqtt.enums import CallbackAPIVersion
 
+from gcsd.channel import Channel
+from gcsd.config import parse_config
 from gcsd.mission import MissionItem
+from gcsd.mqtt import MqttLink
 
 from .bridge import NullModem
 from .helpers import M, Client, pump, udp_channel, udp_url, wait_for
 from .mission_client import MissionClient
-from .mosquitto import Mosquitto, mosquitto_binary
+from .mosquitto import Mosquitto, mosquitto_binary, password_file, tls_files
 
 GROUND_SYSID = 250  # the ground-side daemon's own component (a companion), outside the fleet's sysids
 
@@ -282,3 +290,46 @@ def test_signing_end_to_end_through_the_broker(broker, daemon, client, tap, tmp_
     assert not [r for r in unsigned.since(mark, "PARAM_VALUE") if r.src == (3, 1)]
     assert vehicle.stats("fleet").get("signature_rejects_unsigned", 0) > rejects
     assert param_value(gcs, (3, 1), b"SYSID_THISMAV") == 3.0, "the signed station is still answered"
+
+
+@pytest.fixture
+def tls_broker(tmp_path):
+    if mosquitto_binary() is None or shutil.which("openssl") is None:
+        if os.environ.get("CI"):
+            pytest.fail("mosquitto or openssl is missing: .ci/run installs mosquitto")
+        pytest.skip("mosquitto or openssl is not installed")
+    files = tls_files(tmp_path / "tls")
+    passwd = password_file(tmp_path / "tls" / "passwd", "fleet", "s3cret pass")
+    b = Mosquitto(tmp_path / "tls-broker", anonymous=False,
+                  extra=f"cafile {files['ca']}\ncertfile {files['cert']}\nkeyfile {files['key']}\n"
+                        f"password_file {passwd}\n").start()
+    yield b, files["ca"]
+    b.stop()
+
+
+def test_mqtts_with_a_password_file_and_a_wrong_password_is_refused(tls_broker, daemon, client, tmp_path):
+    broker, ca = tls_broker
+    secret = tmp_path / "mqtt.pass"
+    secret.write_text("s3cret pass\n")  # the first line; the newline is not part of it
+    auth = {"broker": f"mqtts://127.0.0.1:{broker.port}", "ca_file": str(ca), "username": "fleet",
+            "password_file": str(secret)}
+    daemon({"state_dir": str(tmp_path / "v"), "vehicle": {"sysid": 5},
+            "channels": [{"name": "fleet", "type": "mqtt", "topic": "gcsd/tls", "role": "vehicle", **auth}]})
+    ground = daemon({"state_dir": str(tmp_path / "g"), "vehicle": {"type": "companion", "sysid": GROUND_SYSID},
+                     "channels": [udp_channel("gcs"),
+                                  {"name": "fleet", "type": "mqtt", "topic": "gcsd/tls", "role": "ground", **auth}]})
+    gcs = client(udp_url(ground.port("gcs")))
+    assert (5, 1) in heartbeats(gcs, 2.0)
+    assert param_value(gcs, (5, 1), b"SYSID_THISMAV") == 5.0
+
+    wrong = tmp_path / "wrong.pass"
+    wrong.write_text("guess\n")
+    config = parse_config(yaml.safe_dump({"channels": [{"name": "x", "type": "mqtt", "topic": "gcsd/tls",
+                                                        **auth, "password_file": str(wrong)}]}), "x.yaml")
+
+    async def attempt():
+        link = MqttLink(Channel(0, config.channels[0]), config.channels[0].mqtt)
+        await link.open()
+
+    with pytest.raises(OSError, match="refused"):
+        asyncio.run(attempt())  # run_channel logs it and retries with its capped backoff
