@@ -15,22 +15,14 @@ from typing import TYPE_CHECKING
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from .codec import MAVLink_message
+from .vehicles.firmware import FLIGHT_CUSTOM_VERSION, FLIGHT_SW_VERSION
+from .vehicles.health import sensor_bits
 
 if TYPE_CHECKING:
     from .channel import Channel
     from .node import VehicleNode
 
 Producer = Callable[["VehicleNode", "Channel", float], MAVLink_message | None]
-
-FLIGHT_SW_VERSION = (4 << 24) | (7 << 16) | (0 << 8) | M.FIRMWARE_VERSION_TYPE_DEV
-SENSORS = (
-    M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL | M.MAV_SYS_STATUS_SENSOR_3D_MAG
-    | M.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE | M.MAV_SYS_STATUS_SENSOR_GPS
-    | M.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL | M.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
-    | M.MAV_SYS_STATUS_SENSOR_YAW_POSITION | M.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
-    | M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL | M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
-    | M.MAV_SYS_STATUS_AHRS | M.MAV_SYS_STATUS_SENSOR_BATTERY
-)
 
 
 def _e7(deg: float) -> int:
@@ -46,9 +38,11 @@ def heartbeat(node, channel, now):
 
 
 def sys_status(node, channel, now):
+    """Sensor bits as ArduPilot sets them, from the vehicle's real state (gcsd.vehicles.health)."""
     s = node.state
+    present, enabled, healthy = sensor_bits(node)
     return M.MAVLink_sys_status_message(
-        SENSORS, SENSORS, SENSORS, 100, int(s.battery_voltage_v * 1000), int(s.current_a * 100),
+        present, enabled, healthy, 100, int(s.battery_voltage_v * 1000), int(s.current_a * 100),
         s.battery_remaining_pct, 0, node.parse_error_count(), 0, 0, 0, 0,
     )
 
@@ -232,7 +226,7 @@ def autopilot_version(node, channel, now):
     if not channel.mavlink1:
         caps |= M.MAV_PROTOCOL_CAPABILITY_MAVLINK2
     return M.MAVLink_autopilot_version_message(
-        caps, FLIGHT_SW_VERSION, 0, 0, 0, b"gcsd\0\0\0\0", b"\0" * 8, b"\0" * 8, 0, 0, 0, [0] * 18
+        caps, FLIGHT_SW_VERSION, 0, 0, 0, FLIGHT_CUSTOM_VERSION, b"\0" * 8, b"\0" * 8, 0, 0, 0, [0] * 18
     )
 
 

@@ -63,7 +63,11 @@ class Outputs:
         return True
 
     def repeat_relay(self, n: int, count: int, cycle_s: float) -> bool:
-        if count < 1 or cycle_s <= 0 or not 0 <= n < RELAY_COUNT:
+        if count < 0 or not 0 <= n < RELAY_COUNT:
+            return False
+        if count == 0:
+            return True  # ArduPilot's do_repeat_relay takes a zero count: nothing toggles (SITL ACCEPTS it)
+        if cycle_s <= 0:
             return False
         self.set_relay(n, not self.state.relays[n])
         self._repeat = _Repeat("relay", n, 0, 2 * int(count) - 1, cycle_s / 2.0, self._t + cycle_s / 2.0)

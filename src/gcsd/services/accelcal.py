@@ -15,8 +15,10 @@ FAILED otherwise (also when no calibration runs: ArduPilot SITL's answer to para
 After the sixth sample: "Calibration successful", ACCELCAL_VEHICLE_POS_SUCCESS (16777215), and
 the results in ArduPilot's parameters: INS_ACCOFFS_* / INS_ACCSCAL_* (and INS_ACC2OFFS_* /
 INS_ACC2SCAL_* for the second IMU when INS_ACC2_ID is non-zero), AHRS_TRIM_X/Y from the level
-sample. What it finds is the simulated IMU's error, as on SITL: offsets SIM_ACCn_BIAS_*, scale
-1 / (1 + SIM_ACCn_SCAL_*), where those parameters exist (else a perfect IMU: 0 and 1).
+sample. What it finds is the simulated IMU's error (`imu_error`): its own small factory error
+(offsets 0.001 m/s/s, scale factor 1.001 on each axis, the values SITL's default parameters hold)
+plus SIM_ACCn_BIAS_* and SIM_ACCn_SCAL_* where those parameters exist. (An all-zero result would
+read as "never calibrated" to the pre-arm check, as on ArduPilot.)
 A calibration left without an answer for IDLE_TIMEOUT_S fails ("Calibration FAILED",
 ACCELCAL_VEHICLE_POS_FAILED) instead of waiting for ever; `cancel` (PREFLIGHT_CALIBRATION with
 all params 0 while it runs, what QGroundControl's Cancel sends) fails it at once.
@@ -34,6 +36,16 @@ IDLE_TIMEOUT_S = 120.0
 POSITIONS = {1: "level", 2: "on its LEFT side", 3: "on its RIGHT side", 4: "nose DOWN", 5: "nose UP",
              6: "on its BACK"}
 SUCCESS, FAILURE = M.ACCELCAL_VEHICLE_POS_SUCCESS, M.ACCELCAL_VEHICLE_POS_FAILED
+FACTORY_OFFSET_MSS = 0.001
+FACTORY_SCALE = 1.001
+
+
+def imu_error(params, imu: int, axis: str) -> tuple[float, float]:
+    """(offset m/s/s, scale) an accelerometer calibration finds on simulated IMU `imu` (1-based)."""
+    bias = _get(params, f"SIM_ACC{imu}_BIAS_{axis}", 0.0)
+    scale_error = _get(params, f"SIM_ACC{imu}_SCAL_{axis}", 0.0)
+    scale = FACTORY_SCALE / (1.0 + scale_error) if scale_error > -1.0 else FACTORY_SCALE
+    return FACTORY_OFFSET_MSS + bias, scale
 
 
 @dataclass(frozen=True)
@@ -118,10 +130,9 @@ class AccelCal:
             if imu == 2 and not ("INS_ACC2_ID" in p and p.get("INS_ACC2_ID")):
                 continue
             for axis in "XYZ":
-                bias = _get(p, f"SIM_ACC{imu}_BIAS_{axis}", 0.0)
-                scale_error = _get(p, f"SIM_ACC{imu}_SCAL_{axis}", 0.0)
-                _set(p, f"{prefix}OFFS_{axis}", bias)
-                _set(p, f"{prefix}SCAL_{axis}", 1.0 / (1.0 + scale_error) if scale_error > -1.0 else 1.0)
+                offset, scale = imu_error(p, imu, axis)
+                _set(p, f"{prefix}OFFS_{axis}", offset)
+                _set(p, f"{prefix}SCAL_{axis}", scale)
         roll, pitch = self.attitude
         _set(p, "AHRS_TRIM_X", roll)
         _set(p, "AHRS_TRIM_Y", pitch)

@@ -11,8 +11,8 @@
     ACCEPTED when done (QGroundControl's Sensors page waits for that ACK), with ArduPilot's
     STATUSTEXT; the result lands where ArduPilot keeps it: INS_GYROFFS_* (the simulated IMU's
     SIM_GYRn_BIAS_*), BARO1_GND_PRESS (the simulated pressure at the current altitude),
-    AHRS_TRIM_X/Y (the vehicle's attitude now), INS_ACCOFFS_* / INS_ACCSCAL_* (SIM_ACCn_BIAS_*,
-    scales 1, trim 0).
+    AHRS_TRIM_X/Y (the vehicle's attitude now), INS_ACCOFFS_* / INS_ACCSCAL_* (the simulated
+    IMU's offsets, `accelcal.imu_error`; scales 1, trim 0).
   - compass-motor (param6 1), RC (param4 1), temperature (param1 3) and ground pressure
     (param2 1) need hardware that a simulation does not have: UNSUPPORTED.
 - ACCELCAL_VEHICLE_POS: ACCEPTED for the position the running dialogue asks for, else FAILED.
@@ -42,7 +42,7 @@ import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from . import Incoming, Service
-from .accelcal import FAILURE, AccelCal
+from .accelcal import FAILURE, AccelCal, imu_error
 from .commands import CommandRequest
 from .longrunning import LongRunning
 from .magcal import MagCal, compass_params
@@ -144,7 +144,7 @@ class MaintenanceService(Service):
             if imu == 2 and not self._param("INS_ACC2_ID", 0):
                 continue
             for axis in "XYZ":
-                self._set(f"{prefix}OFFS_{axis}", self._param(f"SIM_ACC{imu}_BIAS_{axis}", 0.0))
+                self._set(f"{prefix}OFFS_{axis}", imu_error(self.node.params, imu, axis)[0])
                 self._set(f"{prefix}SCAL_{axis}", 1.0)
         self._set("AHRS_TRIM_X", 0.0)
         self._set("AHRS_TRIM_Y", 0.0)

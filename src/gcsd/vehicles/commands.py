@@ -18,7 +18,10 @@ import math
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from ..autopilot.settings import Behaviour
+
 ACCEPTED, DENIED, FAILED = M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_DENIED, M.MAV_RESULT_FAILED
+UNSUPPORTED = M.MAV_RESULT_UNSUPPORTED
 
 
 def takeoff_in_guided(node, req) -> int:
@@ -56,3 +59,166 @@ def motor_test(node, req) -> int:
 def set_reverse(node, req) -> int:
     node.sim.reversed = req.param1 >= 1
     return ACCEPTED
+
+
+# --- per-vehicle answers ArduPilot gives (../shared/ardupilot/*-probe.json; docs/commands.md) ---
+
+
+def unsupported(node, req) -> int:
+    """The vehicle type does not handle this command (ArduPilot's vehicle code has no case for it)."""
+    return UNSUPPORTED
+
+
+def failed(node, req) -> int:
+    """The vehicle type has the feature compiled in but nothing to do it with (no sprayer on a plane...)."""
+    return FAILED
+
+
+def condition_yaw_any_mode(node, req) -> int:
+    """ArduCopter: CONDITION_YAW sets the auto-yaw target in any mode (angle 0..360, param4 0 absolute
+    or 1 relative), else FAILED."""
+    if not 0 <= req.param1 <= 360 or req.param4 not in (0, 1):
+        return FAILED
+    node.sim.condition_yaw(req.param1, req.param2, req.param3, req.param4)
+    return ACCEPTED
+
+
+def change_speed_copter(node, req) -> int:
+    """ArduCopter: a speed that is not positive is DENIED; else the current mode takes it or FAILED."""
+    if not req.param2 > 0:
+        return DENIED
+    return ACCEPTED if node.sim.change_speed(req.param2) else FAILED
+
+
+def change_speed(node, req) -> int:
+    """ArduPlane / Rover: no positive speed, or a mode that cannot take one: FAILED."""
+    if not req.param2 > 0:
+        return FAILED
+    return ACCEPTED if node.sim.change_speed(req.param2) else FAILED
+
+
+def flight_termination(node, req) -> int:
+    """param1 > 0.5 terminates (the motors stop: disarmed); anything else is FAILED, as ArduPilot."""
+    if req.param1 > 0.5:
+        node.sim.disarm("flight termination")
+        return ACCEPTED
+    return FAILED
+
+
+def _jump_to(node, command: int) -> int:
+    items = node.mission.mission.stored()
+    for seq, item in enumerate(items):
+        if item.command == command:
+            node.mission.mission.set_current(seq)
+            return ACCEPTED if node.sim.start_mission(seq) else FAILED
+    return FAILED
+
+
+def return_path_start(node, req) -> int:
+    """DO_RETURN_PATH_START: continue the mission from its DO_RETURN_PATH_START item (none: FAILED)."""
+    return _jump_to(node, M.MAV_CMD_DO_RETURN_PATH_START)
+
+
+def land_mode(node, req) -> int:
+    """NAV_VTOL_LAND on a copter is NAV_LAND: LAND mode."""
+    number = node.vehicle.mode_number("LAND")
+    return ACCEPTED if number is not None and node.control.set_mode(number) else FAILED
+
+
+def solo_fly_click(node, req) -> int:
+    """ArduCopter's Solo "Fly" button: LOITER (ALT_HOLD without a position), always ACCEPTED."""
+    for name in ("LOITER", "ALT_HOLD"):
+        number = node.vehicle.mode_number(name)
+        if number is not None and node.control.set_mode(number):
+            break
+    return ACCEPTED
+
+
+def solo_fly_hold(node, req) -> int:
+    """Solo "Fly" held: arm when disarmed (pre-arm checks apply), take off when armed and landed."""
+    if not node.state.armed:
+        node.control._arm(forced=False)
+    elif node.state.on_ground:
+        node.sim.takeoff(req.param1 if req.param1 > 0 else node.sim.settings.takeoff_alt_m)
+    return ACCEPTED
+
+
+def solo_pause_click(node, req) -> int:
+    """Solo "Pause": BRAKE when flying; always ACCEPTED."""
+    if node.state.armed and not node.state.on_ground:
+        number = node.vehicle.mode_number("BRAKE")
+        if number is not None:
+            node.control.set_mode(number)
+    return ACCEPTED
+
+
+def sprayer(node, req) -> int:
+    """DO_SPRAYER (AC_Sprayer): param1 1 on, 0 off; ACCEPTED as ArduPilot (it only sprays with
+    SPRAY_ENABLE set and the vehicle moving)."""
+    return ACCEPTED
+
+
+def autotune_enable(node, req) -> int:
+    """ArduPlane DO_AUTOTUNE_ENABLE: 0 turns autotune off (nothing runs: ACCEPTED); the simulation has
+    no autotuner, so turning it on is FAILED."""
+    return ACCEPTED if req.param1 == 0 else FAILED
+
+
+def go_around(node, req) -> int:
+    """ArduPlane DO_GO_AROUND: only while landing (then RTL); else FAILED."""
+    if not node.state.armed or node.state.on_ground or node.sim.behaviour != Behaviour.LAND:
+        return FAILED
+    return ACCEPTED if node.sim.set_mode("RTL") else FAILED
+
+
+def _in_guided(node) -> bool:
+    return node.sim.in_guided()
+
+
+def guided_change_speed(node, req) -> int:
+    """ArduPlane GUIDED_CHANGE_SPEED: GUIDED only (param2 m/s)."""
+    if not _in_guided(node) or not req.param2 > 0:
+        return FAILED
+    return ACCEPTED if node.sim.change_speed(req.param2) else FAILED
+
+
+def guided_change_altitude(node, req) -> int:
+    """ArduPlane GUIDED_CHANGE_ALTITUDE: GUIDED only (param3 m above home)."""
+    if not _in_guided(node):
+        return FAILED
+    s = node.state
+    return ACCEPTED if node.sim.change_altitude(s.home_alt_m + req.param3) else FAILED
+
+
+def set_hagl(node, req) -> int:
+    """ArduPlane SET_HAGL: an external height above ground for the flare; the simulation knows its
+    height, so the estimate is taken (ACCEPTED) and not needed."""
+    return ACCEPTED
+
+
+# --- each vehicle type's table (it wins over the generic services' handlers) -------------------
+COPTER_COMMANDS = {
+    M.MAV_CMD_NAV_TAKEOFF: takeoff_in_guided, M.MAV_CMD_NAV_VTOL_TAKEOFF: takeoff_in_guided,
+    M.MAV_CMD_NAV_VTOL_LAND: land_mode, M.MAV_CMD_DO_MOTOR_TEST: motor_test,
+    M.MAV_CMD_CONDITION_YAW: condition_yaw_any_mode, M.MAV_CMD_DO_CHANGE_SPEED: change_speed_copter,
+    M.MAV_CMD_DO_CHANGE_ALTITUDE: unsupported, M.MAV_CMD_DO_FLIGHTTERMINATION: flight_termination,
+    M.MAV_CMD_DO_LAND_START: land_start, M.MAV_CMD_DO_RETURN_PATH_START: return_path_start,
+    M.MAV_CMD_SOLO_BTN_FLY_CLICK: solo_fly_click, M.MAV_CMD_SOLO_BTN_FLY_HOLD: solo_fly_hold,
+    M.MAV_CMD_SOLO_BTN_PAUSE_CLICK: solo_pause_click, M.MAV_CMD_DO_SPRAYER: sprayer,
+    M.MAV_CMD_DO_WINCH: failed,  # AP_Winch is a copter library; no winch is simulated (WINCH_TYPE 0)
+}
+PLANE_COMMANDS = {
+    M.MAV_CMD_NAV_TAKEOFF: takeoff_mode, M.MAV_CMD_DO_LAND_START: land_start,
+    M.MAV_CMD_CONDITION_YAW: unsupported, M.MAV_CMD_DO_PAUSE_CONTINUE: unsupported,
+    M.MAV_CMD_DO_CHANGE_SPEED: change_speed, M.MAV_CMD_DO_FLIGHTTERMINATION: flight_termination,
+    M.MAV_CMD_DO_RETURN_PATH_START: return_path_start, M.MAV_CMD_DO_AUTOTUNE_ENABLE: autotune_enable,
+    M.MAV_CMD_DO_ENGINE_CONTROL: failed, M.MAV_CMD_DO_VTOL_TRANSITION: failed, M.MAV_CMD_DO_GO_AROUND: go_around,
+    M.MAV_CMD_GUIDED_CHANGE_SPEED: guided_change_speed, M.MAV_CMD_GUIDED_CHANGE_ALTITUDE: guided_change_altitude,
+    M.MAV_CMD_GUIDED_CHANGE_HEADING: failed, M.MAV_CMD_SET_HAGL: set_hagl, M.MAV_CMD_DO_SPRAYER: failed,
+}
+ROVER_COMMANDS = {
+    M.MAV_CMD_DO_SET_REVERSE: set_reverse, M.MAV_CMD_CONDITION_YAW: unsupported,
+    M.MAV_CMD_DO_PAUSE_CONTINUE: unsupported, M.MAV_CMD_DO_FLIGHTTERMINATION: unsupported,
+    M.MAV_CMD_NAV_LOITER_UNLIM: unsupported, M.MAV_CMD_AIRFRAME_CONFIGURATION: unsupported,
+    M.MAV_CMD_DO_PARACHUTE: unsupported, M.MAV_CMD_DO_CHANGE_SPEED: change_speed, M.MAV_CMD_DO_SPRAYER: sprayer,
+}

@@ -83,9 +83,6 @@ COPTER = VehicleType(
     params=PARAMS,
     settings=settings,
     prearm_checks=prearm.FLYING_CHECKS + (prearm.angle_max,),
-    commands={
-        M.MAV_CMD_NAV_TAKEOFF: commands.takeoff_in_guided,
-        M.MAV_CMD_DO_MOTOR_TEST: commands.motor_test,
-    },
+    commands=commands.COPTER_COMMANDS,
     ardupilot_stream_rates=stream_rates(0, 0, 0, 0, 0, 0, 0, 0, 0, 0),
 )

@@ -77,9 +77,6 @@ PLANE = VehicleType(
     params=PARAMS,
     settings=settings,
     prearm_checks=prearm.FLYING_CHECKS,
-    commands={
-        M.MAV_CMD_NAV_TAKEOFF: commands.takeoff_mode,
-        M.MAV_CMD_DO_LAND_START: commands.land_start,
-    },
+    commands=commands.PLANE_COMMANDS,
     ardupilot_stream_rates=stream_rates(1, 1, 1, 1, 1, 1, 1, 1, 10, 5),
 )

@@ -11,7 +11,9 @@ ARMING_CHECK is not 0 (ArduPilot does not let it be skipped either).
 | gps | 8 | no 3D fix, or HDOP above GPS_HDOP_GOOD / 100 |
 | battery | 256 | voltage below BATT_ARM_VOLT, remaining below BATT_ARM_MAH, below 10 %, or already low |
 | rc_calibration | 64 | RC1..4 MIN above 1300, MAX below 1700, TRIM outside MIN..MAX |
-| compass | 4 | an offset of COMPASS_OFS_X/Y/Z beyond COMPASS_OFFS_MAX (with COMPASS_USE) |
+| compass | 4 | a compass in use (COMPASS_DEV_IDn, COMPASS_USEn) with all offsets 0 (never calibrated), or one beyond COMPASS_OFFS_MAX |
+| accelerometers | 16 (INS) | an accelerometer present (INS_ACCn_ID) with INS_ACCnOFFS all 0 or a zero INS_ACCnSCAL (never calibrated) |
+| safety_switch | 2048 | the safety switch is on (DO_SET_SAFETY_SWITCH_STATE) |
 | fence | always | fence enabled and the vehicle outside it, or FENCE_MARGIN >= FENCE_RADIUS |
 """
 
@@ -25,6 +27,8 @@ BIT_GPS = 8
 BIT_PARAMETERS = 32
 BIT_RC = 64
 BIT_BATTERY = 256
+BIT_INS = 16
+BIT_SWITCH = 2048
 LOW_BATTERY_PCT = 10
 
 
@@ -85,14 +89,63 @@ def rc_calibration(node) -> list[str]:
     return out
 
 
+def _compasses_in_use(node) -> list[int]:
+    """Compass indices with a device (COMPASS_DEV_IDn != 0) used for yaw (COMPASS_USEn)."""
+    params = node.params
+    out = []
+    for i, suffix in enumerate(("", "2", "3")):
+        dev, use = f"COMPASS_DEV_ID{suffix}", f"COMPASS_USE{suffix}"
+        if use not in params or not params.get(use):
+            continue
+        if dev in params and not params.get(dev):
+            continue
+        if f"COMPASS_OFS{suffix}_X" in params:
+            out.append(i)
+    return out
+
+
 def compass(node) -> list[str]:
+    """ArduPilot's compass checks: a compass in use with all-zero offsets was never calibrated
+    ("Compass not calibrated", what a fresh board says until the compass calibration ran), and
+    offsets beyond COMPASS_OFFS_MAX are too high."""
     if not _enabled(node, BIT_COMPASS):
         return []
     p = node.params.get
-    if not p("COMPASS_USE"):
+    limit = p("COMPASS_OFFS_MAX") if "COMPASS_OFFS_MAX" in node.params else 1800
+    for i in _compasses_in_use(node):
+        suffix = "" if i == 0 else str(i + 1)
+        offsets = [abs(p(f"COMPASS_OFS{suffix}_{axis}")) for axis in "XYZ"]
+        if not any(offsets):
+            return ["Compass not calibrated"]
+        if max(offsets) > limit:
+            return ["Compass offsets too high"]
+    return []
+
+
+def accelerometers(node) -> list[str]:
+    """ArduPilot's accel_calibrated_ok_all: every accelerometer present (INS_ACCn_ID != 0) needs
+    offsets that are not all zero and scales that are not zero, else "3D Accel calibration needed"
+    (the accelerometer calibration writes them)."""
+    if not _enabled(node, BIT_INS):
         return []
-    worst = max(abs(p("COMPASS_OFS_X")), abs(p("COMPASS_OFS_Y")), abs(p("COMPASS_OFS_Z")))
-    return ["Compass offsets too high"] if worst > p("COMPASS_OFFS_MAX") else []
+    params = node.params
+    for imu, prefix in ((1, "INS_ACC"), (2, "INS_ACC2"), (3, "INS_ACC3")):
+        ident = "INS_ACC_ID" if imu == 1 else f"INS_ACC{imu}_ID"
+        if ident not in params or not params.get(ident) or f"{prefix}OFFS_X" not in params:
+            continue
+        offsets = [params.get(f"{prefix}OFFS_{axis}") for axis in "XYZ"]
+        scales = [params.get(f"{prefix}SCAL_{axis}") for axis in "XYZ"]
+        if not any(offsets) or not all(scales):
+            return ["3D Accel calibration needed"]
+    return []
+
+
+def safety_switch(node) -> list[str]:
+    """The safety switch is on (DO_SET_SAFETY_SWITCH_STATE 0: safe): the outputs are held off."""
+    if not _enabled(node, BIT_SWITCH):
+        return []
+    on = any(getattr(service, "safety_on", False) for service in node.services)
+    return ["Hardware safety switch"] if on else []
 
 
 def fence(node) -> list[str]:
@@ -108,7 +161,7 @@ def fence(node) -> list[str]:
     return [f"Fence: vehicle outside the {fence_check.describe(breach)}"] if breach else []
 
 
-FLYING_CHECKS = (gps, battery, rc_calibration, compass, fence)
+FLYING_CHECKS = (gps, battery, rc_calibration, compass, accelerometers, safety_switch, fence)
 DRIVING_CHECKS = FLYING_CHECKS
 TRACKER_CHECKS = (gps, battery, compass)
 

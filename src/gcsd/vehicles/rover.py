@@ -71,6 +71,6 @@ ROVER = VehicleType(
     params=PARAMS,
     settings=settings,
     prearm_checks=prearm.DRIVING_CHECKS,
-    commands={M.MAV_CMD_DO_SET_REVERSE: commands.set_reverse},
+    commands=commands.ROVER_COMMANDS,
     ardupilot_stream_rates=stream_rates(1, 1, 1, 1, 1, 1, 1, 1, 10, 0),
 )
