@@ -1,10 +1,18 @@
-"""The command line: ``gcsd [run [-c FILE]]``, ``gcsd check-config FILE``, ``gcsd --version``.
+"""The command line: ``gcsd [run] [-c FILE]``, ``gcsd -c FILE``, ``gcsd check-config FILE``,
+``gcsd status [-c FILE] [--json]``, ``gcsd --version``.
 
 `main` returns the exit code (the console script does ``sys.exit(main())``): 0 a clean stop or a
 good configuration, 2 a bad configuration or bad arguments, 1 any other failure. A bad
 configuration is reported as one ``FILE:LINE: key.path: what is wrong`` line per problem on
-stderr, and starts nothing. Each subcommand is one ``_<name>(args) -> int`` function in
-`_COMMANDS`; a new one (``status``) is a parser and an entry there.
+stderr, and starts nothing. check-config checks the text (config.py) and, without changing
+anything, what the daemon will need on disk (preflight.check: state_dir, params_file, tlog);
+`run` creates what it needs first (preflight.prepare, in app.py) and refuses to start with the
+same lines. Each subcommand is one ``_<name>(args) -> int`` function in `_COMMANDS`.
+
+``-c FILE`` before the command (``gcsd -c FILE``, as the sitl/ headers write it) is the same as
+after it: ``gcsd -c FILE`` runs FILE, ``gcsd -c FILE status`` asks FILE's daemon.
+`gcsd status` finds a daemon by the rule in control.py (state_dir's socket, else the daemon
+registered with the same configuration file, else every registered daemon of this user).
 """
 
 from __future__ import annotations
@@ -30,6 +38,12 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help and --version (0), bad arguments (2)
         return exc.code if isinstance(exc.code, int) else EXIT_OK
+    top_config = getattr(args, "top_config", None)
+    if top_config is not None and getattr(args, "config", None) is None:
+        args.config = top_config
+    if args.command == "check-config" and top_config is not None:
+        print("gcsd: check-config takes the file as its argument: gcsd check-config FILE", file=sys.stderr)
+        return EXIT_BAD_CONFIG
     return _COMMANDS[args.command or "run"](args)
 
 
@@ -38,6 +52,8 @@ def _parser() -> argparse.ArgumentParser:
         prog="gcsd", description="The vehicle side of MAVLink: a simulated or embedded vehicle that "
                                  "ground stations connect to. With no command: run.")
     parser.add_argument("--version", action="version", version=f"gcsd {__version__}")
+    parser.add_argument("-c", "--config", metavar="FILE", dest="top_config",
+                        help="configuration file; `gcsd -c FILE` is `gcsd run -c FILE`")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")
     run = commands.add_parser("run", help="run in the foreground (the default command)")
     run.add_argument("-c", "--config", metavar="FILE",
@@ -45,7 +61,10 @@ def _parser() -> argparse.ArgumentParser:
     check = commands.add_parser("check-config", help="validate a configuration file and exit")
     check.add_argument("file", metavar="FILE")
     status = commands.add_parser("status", help="show a running daemon's channels, routes and counters")
-    status.add_argument("-c", "--config", metavar="FILE", help="the running daemon's configuration (for state_dir)")
+    status.add_argument("-c", "--config", metavar="FILE",
+                        help="the running daemon's configuration (its state_dir holds the socket; a daemon "
+                             "started from another directory with the same file is found through its "
+                             "registration)")
     status.add_argument("--json", action="store_true", help="print the raw JSON")
     return parser
 
@@ -72,10 +91,16 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _check_config(args: argparse.Namespace) -> int:
+    from gcsd import preflight
+
     try:
-        load_config(args.file)
+        config = load_config(args.file)
     except ConfigError as exc:
         _print_problems(exc)
+        return EXIT_BAD_CONFIG
+    problems = preflight.check(config)
+    if problems:
+        _print_problems(ConfigError(problems))
         return EXIT_BAD_CONFIG
     print(f"{args.file}: ok")
     return EXIT_OK
@@ -99,11 +124,28 @@ def _status(args: argparse.Namespace) -> int:
         return EXIT_BAD_CONFIG
     path = Path(config.state_dir) / control.SOCKET_NAME
     try:
-        status = control.query(path)
+        answers = [(None, control.query(path))]
     except OSError as exc:
-        print(f"gcsd status: no daemon answers on {path}: {exc}", file=sys.stderr)
+        local_error = exc
+        answers = []
+    if not answers:  # started from another directory? ask the registered daemons
+        for entry in control.registered():
+            if args.config is not None and not control.same_file(entry.get("config"), args.config):
+                continue
+            try:
+                answers.append((entry, control.query(Path(entry["socket"]))))
+            except OSError:
+                continue
+    if not answers:
+        which = "" if args.config is None else f" started with {args.config}"
+        print(f"gcsd status: no daemon answers on {path} ({local_error.strerror or local_error}), and no "
+              f"daemon{which} is registered in {control.runtime_dir()}", file=sys.stderr)
         return EXIT_FAILURE
-    print(json.dumps(status, indent=2) if args.json else control.format_status(status))
+    if args.json:
+        documents = [status for _, status in answers]
+        print(json.dumps(documents[0] if len(documents) == 1 else documents, indent=2))
+    else:
+        print("\n\n".join(control.format_status(status, entry) for entry, status in answers))
     return EXIT_OK
 
 

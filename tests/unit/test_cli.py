@@ -155,3 +155,83 @@ def test_run_exits_1_when_the_daemon_fails(daemon, capsys):
     daemon.failure = RuntimeError("boom")
     assert main(["run"]) == 1
     assert "daemon_failed" in capsys.readouterr().out
+
+
+# --- gcsd -c FILE --------------------------------------------------------------------------------------
+
+
+def test_dash_c_before_any_command_runs_the_file_as_the_sitl_headers_write_it(daemon):
+    assert main(["-c", str(DEFAULT_YAML)]) == 0
+    assert main(["--config", str(DEFAULT_YAML), "run"]) == 0
+    assert daemon.runs == [load_config(DEFAULT_YAML)] * 2
+
+
+def test_dash_c_with_a_bad_file_exits_2_without_starting(bad_config, daemon, capsys):
+    assert main(["-c", str(bad_config)]) == 2
+    assert daemon.runs == []
+    assert capsys.readouterr().err.splitlines()[0] == f"{bad_config}:2: vehicle.sysid: expected an integer 1..255, got 0"
+
+
+def test_dash_c_before_check_config_is_refused_with_a_hint(capsys):
+    assert main(["-c", str(DEFAULT_YAML), "check-config", str(DEFAULT_YAML)]) == 2
+    assert capsys.readouterr().err == "gcsd: check-config takes the file as its argument: gcsd check-config FILE\n"
+
+
+def test_python_m_gcsd_dash_c_of_a_bad_file_exits_2(bad_config):
+    env = {**os.environ, "PYTHONPATH": str(REPO / "src")}
+    result = subprocess.run([sys.executable, "-m", "gcsd", "-c", str(bad_config)],
+                            capture_output=True, text=True, env=env, timeout=60)
+    assert result.returncode == 2
+    assert result.stderr.splitlines()[0] == f"{bad_config}:2: vehicle.sysid: expected an integer 1..255, got 0"
+
+
+# --- status tables -------------------------------------------------------------------------------------
+
+STATUS = {
+    "version": "0.1.0", "uptime_s": 3725.2,
+    "channels": [{"name": "gcs", "type": "udp-server", "address": "127.0.0.1:14550", "peers": 2, "rate_in": 12.4,
+                  "rate_out": 85.0, "packets_in": 1200, "packets_out": 9000, "bytes_in": 40000, "bytes_out": 512000,
+                  "parse_errors": 1, "crc_errors": 2, "unknown_ids": 3, "seq_gaps": 4, "drops": 5,
+                  "signature_rejects": 6, "peers_forgotten": 7, "peers_replaced": 8,
+                  "signature_reject_reasons": {"bad_signature": 6}}],
+    "routes": [{"sysid": 255, "compid": 190, "channel": "gcs", "mavtype": 6, "age_s": 0.42},
+               {"sysid": 42, "compid": 1, "channel": "gcs", "mavtype": None, "age_s": 3.0}],
+    "vehicles": [{"sysid": 1, "compid": 1, "type": "copter", "mode": "STABILIZE", "armed": False}],
+    "errors": {"producer:SYS_STATUS": 3, "handler:PARAM_SET": 1},
+}
+
+
+def test_status_tables_have_titles_units_and_mav_type_names():
+    from gcsd.control import format_status
+
+    text = format_status(STATUS, {"pid": 4321, "config": "/etc/gcsd/gcsd.yaml"})
+    lines = text.splitlines()
+    assert lines[0] == "gcsd 0.1.0, up 1 h 2 min (pid 4321, config /etc/gcsd/gcsd.yaml)"
+    for title in ("Channels", "Channel errors and drops (counts)", "Routes learned", "Vehicles",
+                  "Errors (exceptions caught, by component)"):
+        assert title in lines
+    for header in ("in (pkt/s)", "out (pkt/s)", "in (B)", "out (B)", "last heard (s ago)"):
+        assert header in text
+    routes = lines[lines.index("Routes learned") + 3:lines.index("Routes learned") + 5]
+    assert routes[0].split() == ["255", "190", "GCS", "gcs", "0.4"]
+    assert routes[1].split() == ["42", "1", "-", "gcs", "3.0"]  # no heartbeat yet: no type
+    errors = lines[lines.index("Errors (exceptions caught, by component)") + 3:]
+    assert [e.split() for e in errors[:2]] == [["handler:PARAM_SET", "1"], ["producer:SYS_STATUS", "3"]]
+    assert "Signing rejects by reason: gcs: bad_signature 6" in text
+
+
+def test_status_shows_none_for_empty_tables():
+    from gcsd.control import format_status
+
+    text = format_status({**STATUS, "routes": [], "errors": {}})
+    assert "Routes learned: none" in text.splitlines()
+    assert "Errors (exceptions caught, by component): none" in text.splitlines()
+    assert text.splitlines()[0] == "gcsd 0.1.0, up 1 h 2 min"
+
+
+@pytest.mark.parametrize(("mav_type", "name"), [(2, "QUADROTOR"), (1, "FIXED_WING"), (6, "GCS"), (None, "-"),
+                                                (999, "999")])
+def test_mav_type_names(mav_type, name):
+    from gcsd.control import mav_type_name
+
+    assert mav_type_name(mav_type) == name
