@@ -21,7 +21,7 @@ so nothing carries over between them) and cost no state. A tcp-server connection
 once when the channel needs no signature (TCP cannot be spoofed and a plain pymavlink client
 waits for our HEARTBEAT first), otherwise only after a good signed frame. Client and serial
 channels have their one peer from the start. At most `max_peers` peers are served; a new one
-replaces the one silent the longest. A udp-server forgets a peer silent for 30 s (`sweep`).
+replaces a connection that has not sent a good frame yet, else the peer silent the longest. A udp-server forgets a peer silent for 30 s (`sweep`).
 
 Output: every admitted peer gets every frame. Forwarded frames go out byte-exact; our own
 messages are encoded once per version in use on the channel (usually once, MAVLink2 signed
@@ -191,7 +191,8 @@ class Channel:
 
     def _admit(self, peer: Peer) -> None:
         if len(self.peers) >= self.max_peers:
-            silent = min(self.peers.values(), key=lambda p: p.last_rx_s)
+            # a connection that never sent a good frame goes first, then the one silent the longest
+            silent = min(self.peers.values(), key=lambda p: (p.heard, p.last_rx_s))
             self.remove_peer(silent.key)
             self.stats.peers_replaced += 1
             if silent.close is not None:
