@@ -59,6 +59,8 @@ def routers_table(labels: dict[str, str], rows: Iterable[RouterRow]) -> str:
         verdict = None if ok is None or gv is None else ok(vals)
         meets = "" if verdict is None else ("yes" if verdict else "NO")
         body.append((name, *(fmt(vals.get(r)) for r in labels), *ratios, target, meets))
+    if not body:
+        return ""
     widths = [max(len(r[i]) for r in (head, *body)) for i in range(len(head))]
 
     def line(r):

@@ -3,7 +3,8 @@ one vehicle's cost.
 
     python -m bench                      # everything (about 5 minutes on an idle machine)
     python -m bench --quick              # smoke run (about 1 minute)
-    python -m bench throughput latency   # just these; also: harness, vehicle, params, mission, signing, ftp
+    python -m bench throughput latency   # just these; also: harness, vehicle, params, param_flood, mission,
+                                         # signing, swarm, ftp
     python -m bench --routers mavproxy   # only some routers (default gcsd,mavlink-router,mavproxy)
 
 mavlink-router is the binary in $GCSD_MAVLINK_ROUTER (or mavlink-routerd on PATH); without it the
@@ -34,6 +35,7 @@ if __package__ in (None, ""):  # run as a script: python bench/run.py
 from bench import ftp as bench_ftp  # noqa: E402
 from bench import measure  # noqa: E402
 from bench import mission as bench_mission  # noqa: E402
+from bench import param_flood as bench_param_flood  # noqa: E402
 from bench import signing as bench_signing  # noqa: E402
 from bench import swarm as bench_swarm  # noqa: E402
 from bench import params as bench_params  # noqa: E402
@@ -55,7 +57,8 @@ from bench.routers import (  # noqa: E402
     start_mavproxy,
 )
 
-WHAT = ("harness", "throughput", "latency", "vehicle", "params", "mission", "signing", "swarm", "ftp")
+WHAT = ("harness", "throughput", "latency", "vehicle", "params", "param_flood", "mission", "signing", "swarm",
+        "ftp")
 ROUTERS = {"gcsd": "gcsd", "mavlink-router": "mavlink-router", "mavproxy": "MAVProxy"}  # name -> column
 LATENCY_RATE = 1000
 
@@ -226,13 +229,13 @@ class Runner:
     # ----------------------------------------------------------------------------- measurements
     def run(self) -> None:
         a = self.a
-        if "gcsd" in a.routers or a.what & {"vehicle", "params", "mission", "signing", "ftp"}:
+        if "gcsd" in a.routers or a.what & {"vehicle", "params", "param_flood", "mission", "signing", "ftp"}:
             ok, text = gcsd_available(self.gcsd_env)
             self.res["gcsd_version"] = text
             if not ok:
                 self.notes.append(f"gcsd not runnable ({text}); its columns are n/a")
                 a.routers = [r for r in a.routers if r != "gcsd"]
-                a.what -= {"vehicle", "params", "mission", "signing", "ftp"}
+                a.what -= {"vehicle", "params", "param_flood", "mission", "signing", "ftp"}
                 log(f"gcsd not runnable: {text}")
         if "mavlink-router" in a.routers and a.what & {"throughput", "latency"}:
             self.mavlink_router, how = mavlink_router_binary()
@@ -251,6 +254,8 @@ class Runner:
             self.vehicle()
         if "params" in a.what:
             self.params()
+        if "param_flood" in a.what:  # bench/param_flood.py: a second client's latency under 1 000 PARAM_SET/s
+            self.res["param_flood"] = bench_param_flood.measure(self.workdir, a.quick, self.gcsd_env)
         if "mission" in a.what:
             self.mission()
         if "signing" in a.what:
@@ -437,6 +442,8 @@ class Runner:
         if self.res.get("params"):
             out += ["", "Parameters: full list by PARAM_REQUEST_LIST on loopback, gcsd against MAVSDK's "
                     "param_server (bench/params.py)", "", bench_params.table(self.res["params"])]
+        if self.res.get("param_flood"):
+            out += ["", bench_param_flood.table(self.res["param_flood"])]
         if self.res.get("mission"):
             out += ["", "Missions: 1 000 items uploaded and downloaded by MAVSDK mission_raw, gcsd against MAVSDK's "
                     "mission_raw_server (bench/mission.py)", "", bench_mission.table(self.res["mission"])]
