@@ -275,6 +275,7 @@ def _config(r: _Reader, top: _Section) -> Config:
     log = r.section(top["log"], ("level", "format", "tlog"))
     gcs = r.section(top["gcs"], ("sysid", "enforce_sysid"))
     params_file = r.path(top["params_file"], None, nullable=True)
+    channels = _channels(r, top["channels"])
     return Config(
         vehicle=_vehicle(r, r.section(top["vehicle"], _VEHICLE_KEYS)),
         state_dir=Path(r.path(top["state_dir"], "./gcsd-state")),
@@ -286,17 +287,19 @@ def _config(r: _Reader, top: _Section) -> Config:
                       max_file_bytes=r.integer(ftp["max_file_bytes"], DEFAULT_FTP_MAX_FILE_BYTES, 1,
                                                MAX_FTP_FILE_BYTES)),
         signing=_signing(r, r.section(top["signing"], ("key", "require"))),
-        channels=_channels(r, top["channels"]),
+        channels=channels,
         log=LogConfig(level=r.choice(log["level"], "info", LOG_LEVELS),
                       format=r.choice(log["format"], "console", LOG_FORMATS),
                       tlog=r.path(log["tlog"], None, nullable=True)),
-        serial_control=_serial_control(r, top["serial_control"]),
+        serial_control=_serial_control(r, top["serial_control"], channels),
     )
 
 
-def _serial_control(r: _Reader, f: _Field) -> tuple[SerialControlPort, ...]:
+def _serial_control(r: _Reader, f: _Field, channels: tuple[ChannelConfig, ...]) -> tuple[SerialControlPort, ...]:
     ports = []
     seen: set[str] = set()
+    taken = {os.path.normpath(ch.device): i for i, ch in enumerate(channels) if ch.type == "serial" and ch.device}
+    taken_by_port: dict[str, str] = {}
     for item in r.sequence(f):
         c = r.section(item, ("port", "device", "baud"))
         for key in ("port", "device"):
@@ -306,7 +309,16 @@ def _serial_control(r: _Reader, f: _Field) -> tuple[SerialControlPort, ...]:
         if port and port in seen:
             r.problem(c["port"], f"duplicate serial_control port {port!r}")
         seen.add(port)
-        ports.append(SerialControlPort(port=port, device=r.path(c["device"], ""), baud=r.integer(c["baud"], 115200, 1)))
+        device = r.path(c["device"], "")
+        if device and os.path.normpath(device) in taken:
+            index = taken[os.path.normpath(device)]
+            r.problem(c["device"], f"serial device {device} is already used by channels[{index}] ({channels[index].name})")
+        elif device and os.path.normpath(device) in taken_by_port:
+            r.problem(c["device"], f"serial device {device} is already used by serial_control port "
+                                   f"{taken_by_port[os.path.normpath(device)]}")
+        elif device:
+            taken_by_port[os.path.normpath(device)] = port
+        ports.append(SerialControlPort(port=port, device=device, baud=r.integer(c["baud"], 115200, 1)))
     return tuple(p for p in ports if p.port and p.device)
 
 

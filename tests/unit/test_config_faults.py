@@ -230,6 +230,16 @@ def test_two_channels_on_one_port_or_device_are_refused_by_check_config_and_run(
     assert check == (2, [f"{config}:3: {what}"]) and run == check
 
 
+def test_a_serial_control_port_on_a_channels_device_or_another_ports_device_is_refused(here, capsys):
+    config = write(here / "g.yaml", "channels:\n  - {name: fc, type: serial, device: /dev/ttyAMA0}\n"
+                                    "serial_control:\n  - {port: telem1, device: /dev/ttyAMA0}\n"
+                                    "  - {port: gps1, device: /dev/ttyUSB1}\n  - {port: gps2, device: /dev/ttyUSB1}\n")
+    assert cli(["check-config", str(config)], capsys) == (2, [
+        f"{config}:4: serial_control[0].device: serial device /dev/ttyAMA0 is already used by channels[0] (fc)",
+        f"{config}:6: serial_control[2].device: serial device /dev/ttyUSB1 is already used by serial_control port gps1",
+    ])
+
+
 @pytest.mark.parametrize("pair", [
     ("{name: a, type: udp-server, address: '127.0.0.1:14599'}", "{name: b, type: tcp-server, address: '127.0.0.1:14599'}"),
     ("{name: a, type: udp-server, address: '127.0.0.1:0'}", "{name: b, type: udp-server, address: '127.0.0.1:0'}"),
