@@ -1,7 +1,10 @@
 """Commands whose meaning differs per vehicle type: `handler(node, request) -> MAV_RESULT`.
 
-A vehicle type lists the ones it supports in `VehicleType.commands`; a vehicle that lists
-none answers UNSUPPORTED (a sub or a rover cannot take off).
+A vehicle type lists the ones it supports in `VehicleType.commands` (COPTER_COMMANDS etc. at
+the end); that table wins over the generic services' handlers (autopilot.attach applies it
+last), so a vehicle type can also say `unsupported` (ArduPilot's vehicle code has no case for
+the command: CONDITION_YAW on a plane, landing gear on a rover) or `failed`. Which answer each
+gets follows ArduPilot SITL's (../shared/ardupilot/*-probe.json; docs/commands.md).
 
 - takeoff_in_guided (copter, blimp): NAV_TAKEOFF param7 = altitude above home; needs GUIDED,
   armed, on the ground (else FAILED), as ArduCopter's do_user_takeoff.
@@ -10,6 +13,8 @@ none answers UNSUPPORTED (a sub or a rover cannot take off).
 - motor_test (copter): DO_MOTOR_TEST param1 motor, param3 throttle %, param4 seconds;
   disarmed only (DENIED armed).
 - set_reverse (rover): DO_SET_REVERSE param1 1 drives backwards.
+- the rest (condition_yaw_any_mode, change_speed*, flight_termination, return_path_start,
+  solo buttons, plane's autotune/go-around/guided changes...) say ArduPilot's rule each.
 """
 
 from __future__ import annotations
