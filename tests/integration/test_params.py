@@ -14,6 +14,7 @@ import time
 import pytest
 
 from gcsd.params import parameter_set
+from gcsd.params.parmfile import read_parm
 
 from .helpers import Client, M, download_params, is_type, pump, rate_hz, udp_channel, udp_url, wait_for
 
@@ -320,3 +321,18 @@ def test_a_flood_of_1000_sets_per_second_is_two_file_writes_and_another_client_s
     assert all(name.startswith("gcsd-persist") for _, name in writes), "written off the event loop"
     saved = (state / "mav.parm").read_text()
     assert f"COMPASS_OFS_X    {1000 * 0.25:g}\n" in saved
+
+
+def test_a_set_still_waiting_for_its_write_is_flushed_by_a_clean_stop(daemon, client, tmp_path):
+    """The second of two quick sets is due a second after the first write; stopping at once
+    must not lose it (node.close flushes the write-behind)."""
+    conf = {"state_dir": str(tmp_path / "st"), "channels": [udp_channel("gcs")]}
+    d = daemon(conf)
+    c = client(udp_url(d.port("gcs")))
+    for value in (1501.0, 1502.0):
+        mark = set_param(c, "RC3_TRIM", value, M.MAV_PARAM_TYPE_INT16)
+        r = wait_for(c, lambda r: r.type == "PARAM_VALUE" and param_name(r.msg) == "RC3_TRIM", since=mark)
+        assert r is not None and r.msg.param_value == value
+    d.stop()
+    values, problems = read_parm(tmp_path / "st" / "mav.parm")
+    assert problems == [] and values["RC3_TRIM"] == 1502.0
