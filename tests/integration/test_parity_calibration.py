@@ -5,7 +5,8 @@ against the real daemon over UDP with pymavlink: each result lands in ArduPilot'
   -> MAG_CAL_PROGRESS ... -> MAG_CAL_REPORT per compass -> COMPASS_OFS* read back.
 - Accelerometer: PREFLIGHT_CALIBRATION param5 1 -> ACCELCAL_VEHICLE_POS 1..6 from the vehicle, each
   answered by a COMMAND_ACK (QGC's Next button) -> ACCELCAL_VEHICLE_POS_SUCCESS.
-- Level (param5 2), simple accelerometer (param5 4), barometer (param3 1): IN_PROGRESS, then ACCEPTED.
+- Level (param5 2): IN_PROGRESS, then ACCEPTED, AHRS_TRIM_* set.
+The same dialogues with a float clock, and the other calibrations: tests/unit/test_calibration.py.
 """
 
 from __future__ import annotations
@@ -69,28 +70,6 @@ def test_compass_calibration_as_qgroundcontrol_runs_it_saves_offsets_and_the_dae
     assert _ack(gcs, M.MAV_CMD_DO_ACCEPT_MAG_CAL) == M.MAV_RESULT_ACCEPTED
 
 
-def test_compass_calibration_without_autosave_waits_for_accept(gcs):
-    before = [_param(gcs, f"COMPASS_OFS_{a}") for a in "XYZ"]
-    gcs.send(M.MAVLink_param_set_message(1, 1, b"COMPASS_OFS_X", 0.0, M.MAV_PARAM_TYPE_REAL32))
-    assert wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and r.msg.param_id == "COMPASS_OFS_X", 3.0)
-    mark = gcs.mark()
-    assert _ack(gcs, M.MAV_CMD_DO_START_MAG_CAL, 1, 0, 0) == M.MAV_RESULT_ACCEPTED
-    assert _ack(gcs, M.MAV_CMD_DO_ACCEPT_MAG_CAL) == M.MAV_RESULT_FAILED  # still running
-    report = wait_for(gcs, lambda r: r.type == "MAG_CAL_REPORT", 10.0, since=mark)
-    assert report is not None and report.msg.autosaved == 0
-    assert _param(gcs, "COMPASS_OFS_X") == 0.0  # not saved yet
-    assert _ack(gcs, M.MAV_CMD_DO_ACCEPT_MAG_CAL) == M.MAV_RESULT_ACCEPTED
-    assert _param(gcs, "COMPASS_OFS_X") == pytest.approx(report.msg.ofs_x)
-    assert report.msg.ofs_x != 0.0 and before[1] is not None
-
-
-def test_compass_calibration_is_refused_while_armed(gcs):
-    assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM, 1, 21196) == M.MAV_RESULT_ACCEPTED
-    mark = gcs.mark()
-    assert _ack(gcs, M.MAV_CMD_DO_START_MAG_CAL, 0, 0, 1) == M.MAV_RESULT_FAILED
-    assert wait_for(gcs, lambda r: r.type == "STATUSTEXT" and "Disarm" in r.msg.text, 3.0, since=mark)
-
-
 def test_accelerometer_calibration_six_positions_answered_like_qgroundcontrol(gcs):
     mark = gcs.mark()
     assert _ack(gcs, M.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 0, 1) == M.MAV_RESULT_ACCEPTED
@@ -129,17 +108,15 @@ def test_accelcal_vehicle_pos_from_the_ground_station_must_match_the_position_as
                     and r.msg.param1 == M.ACCELCAL_VEHICLE_POS_FAILED, 3.0, since=mark)
 
 
-@pytest.mark.parametrize("params, text", [
-    ((0, 0, 0, 0, 2), "Trim OK"),
-    ((0, 0, 0, 0, 4), "Accelerometer calibration complete"),
-    ((0, 0, 1, 0, 0), "Updating barometer calibration"),
-])
-def test_one_shot_calibrations_report_in_progress_then_accepted(gcs, params, text):
+def test_level_calibration_reports_in_progress_then_accepted_and_sets_ahrs_trim(gcs):
+    gcs.send(M.MAVLink_param_set_message(1, 1, b"AHRS_TRIM_X", 0.1, M.MAV_PARAM_TYPE_REAL32))
+    assert wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and r.msg.param_id == "AHRS_TRIM_X", 3.0)
     mark = gcs.mark()
-    gcs.command_long(M.MAV_CMD_PREFLIGHT_CALIBRATION, *params)
+    gcs.command_long(M.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 0, 2)  # QGroundControl's "Level Horizon"
     first = wait_for(gcs, is_ack(M.MAV_CMD_PREFLIGHT_CALIBRATION), 3.0, since=mark)
     assert first is not None and first.msg.result == M.MAV_RESULT_IN_PROGRESS
     final = wait_for(gcs, lambda r: is_ack(M.MAV_CMD_PREFLIGHT_CALIBRATION)(r)
                      and r.msg.result == M.MAV_RESULT_ACCEPTED, 6.0, since=mark)
     assert final is not None
-    assert wait_for(gcs, lambda r: r.type == "STATUSTEXT" and text in r.msg.text, 3.0, since=mark)
+    assert wait_for(gcs, lambda r: r.type == "STATUSTEXT" and "Trim OK" in r.msg.text, 3.0, since=mark)
+    assert _param(gcs, "AHRS_TRIM_X") == pytest.approx(0.0)  # the vehicle sits level

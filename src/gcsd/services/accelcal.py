@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 ASK_INTERVAL_S = 1.0
-SAMPLE_S = 1.0
+SAMPLE_S = 0.5
 IDLE_TIMEOUT_S = 120.0
 POSITIONS = {1: "level", 2: "on its LEFT side", 3: "on its RIGHT side", 4: "nose DOWN", 5: "nose UP",
              6: "on its BACK"}
