@@ -380,13 +380,13 @@ def retried(process, line: str, pattern: str, attempt_s: float, attempts: int, w
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("GCSD_LONG_TESTS"), reason=LONG_REASON)
 def test_mavproxy_round_trips_500_items_through_20_percent_loss(gcsd_daemon, mavproxy, tmp_path):
-    """MAVProxy answers each MISSION_REQUEST; gcsd re-requests what is lost (every 100 ms here,
-    `mission.retry_ms`). MAVProxy stops answering once it has sent the last item, so a lost last
+    """MAVProxy answers each MISSION_REQUEST; gcsd re-requests what is lost after its adaptive
+    timeout (the default configuration: tens of ms on loopback, see gcsd.rtt). MAVProxy stops answering once it has sent the last item, so a lost last
     item (or a lost ACK) fails that upload: the command is repeated, as its user would. Downloading,
     MAVProxy asks 5 items ahead and asks again only after 2 s, so every lost item costs it 2 s,
     and a lost MISSION_REQUEST_LIST or MISSION_COUNT is never asked again: `wp save` is repeated
     when no "Requesting" line comes."""
-    daemon = gcsd_daemon({"mission": {"retry_ms": 100}})
+    daemon = gcsd_daemon()
     proxy = LossyProxy(daemon.port("gcs"), loss=0.2, seed=500)
     try:
         process = mavproxy(proxy.port)
@@ -416,12 +416,12 @@ def test_mavproxy_round_trips_500_items_through_20_percent_loss(gcsd_daemon, mav
 @pytest.mark.skipif(not os.environ.get("GCSD_LONG_TESTS"), reason=LONG_REASON)
 async def test_mavsdk_round_trips_500_items_through_20_percent_loss(gcsd_daemon):
     """MAVSDK gives each item 5 tries 0.5 s apart and then abandons the whole transfer. Uploading,
-    gcsd re-requests a lost item every 100 ms here (`mission.retry_ms`); downloading, gcsd sends
+    gcsd re-requests a lost item after its adaptive timeout (default configuration); downloading, gcsd sends
     an item asked for again twice. A whole transfer can still fail now and then on 20 % loss each
     way, so, as a MAVSDK application would, this retries a failed upload or download (up to 8
     times); gcsd keeps the old plan until an upload completes, so a failed attempt leaves nothing
     half-written. About 2-3 minutes when the first attempts succeed."""
-    daemon = gcsd_daemon({"mission": {"retry_ms": 100}})
+    daemon = gcsd_daemon()
     proxy = LossyProxy(daemon.port("gcs"), loss=0.2, seed=501)
     attempts = {"upload": 0, "download": 0}
     try:

@@ -23,6 +23,7 @@ from gcsd.mission import (
     Send,
     Text,
 )
+from gcsd.rtt import RttTable
 
 GCS = Origin(255, 190, "gcs")
 OTHER = Origin(250, 1, "other")  # another ground station
@@ -377,30 +378,110 @@ def test_a_save_that_fails_keeps_the_old_plan_and_acks_error(kind):
 # --- timeouts and retries ----------------------------------------------------------------------------
 
 
-def test_upload_rerequests_the_missing_item_every_second(kind):
+def test_before_any_round_trip_is_measured_the_rerequest_waits_250_ms_then_backs_off(kind):
+    mt = machine(kind)
+    mt.mission_count(GCS, 3, 10.0)
+    assert mt.next_deadline() == pytest.approx(10.25)
+    assert mt.tick(10.249) == []
+    assert requests(mt.tick(10.25)) == [0]
+    assert mt.next_deadline() == pytest.approx(10.75)
+    assert requests(mt.tick(10.75)) == [0]
+    assert mt.next_deadline() == pytest.approx(11.75)  # x4, and retry_s is the ceiling anyway
+    assert requests(mt.tick(11.75)) == [0]
+    assert mt.next_deadline() == pytest.approx(12.75)
+
+
+def test_a_small_retry_s_is_also_the_first_timeout(kind):
+    mt = machine(kind, retry_s=0.1)
+    mt.mission_count(GCS, 3, 0.0)
+    assert requests(mt.tick(0.1)) == [0]
+
+
+def test_the_first_round_trip_sets_the_timeout_as_rfc_6298_says(kind):
+    """R = 0.25 s: SRTT = R, RTTVAR = R / 2, RTO = SRTT + 4 RTTVAR = 0.75 s."""
     mt = machine(kind)
     plan = kind.plan(3)
     mt.mission_count(GCS, 3, 10.0)
-    mt.mission_item(GCS, 0, plan[0], False, 10.25)
-    assert mt.next_deadline() == pytest.approx(11.25)
-    assert mt.tick(11.249) == []
-    assert requests(mt.tick(11.25)) == [1]
-    assert mt.next_deadline() == pytest.approx(12.25)
-    assert requests(mt.tick(12.25)) == [1]
+    assert requests(mt.mission_item(GCS, 0, plan[0], False, 10.25)) == [1]
+    assert mt.next_deadline() == pytest.approx(11.0)
+    assert mt.tick(10.999) == []
+    assert requests(mt.tick(11.0)) == [1]
 
 
-def test_rerequest_interval_adds_the_links_radio_slowdown(kind):
-    mt = machine(kind, slowdown_s=lambda channel: 0.5 if channel == GCS.channel else 0.0)
+def test_a_fast_uploader_gets_a_lost_item_asked_for_again_within_tens_of_ms(kind):
+    mt = machine(kind)
+    plan = kind.plan(10)
+    now = 0.0
+    mt.mission_count(GCS, 10, now)
+    for seq in range(5):  # answered in 2 ms each
+        now += 0.002
+        mt.mission_item(GCS, seq, plan[seq], False, now)
+    # the request for item 5 (sent at `now`) is lost
+    assert mt.next_deadline() - now == pytest.approx(0.02)  # the floor: SRTT 2 ms + G 10 ms < 20 ms
+    assert requests(mt.tick(now + 0.02)) == [5]
+
+
+def test_each_timeout_doubles_the_rerequest_interval_up_to_retry_s(kind):
+    mt = machine(kind)
+    plan = kind.plan(3)
     mt.mission_count(GCS, 3, 0.0)
-    assert mt.next_deadline() == pytest.approx(1.5)
-    assert mt.tick(1.2) == []
-    assert requests(mt.tick(1.5)) == [0]
+    mt.mission_item(GCS, 0, plan[0], False, 0.1)  # RTO 0.1 + 4 * 0.05 = 0.3 s
+    now = 0.1
+    gaps = []
+    for _ in range(5):
+        deadline = mt.next_deadline()
+        gaps.append(round(deadline - now, 6))
+        now = deadline
+        assert requests(mt.tick(now)) == [1]
+    assert gaps == [0.3, 0.6, 1.0, 1.0, 1.0]
 
 
-def test_rerequest_interval_is_configurable(kind):
-    mt = machine(kind, retry_s=0.25)
+def test_an_item_answering_a_repeated_request_gives_no_sample_and_keeps_the_backoff(kind):
+    """Karn's rule: it cannot be told which copy of the request the item answers."""
+    mt = machine(kind)
+    plan = kind.plan(4)
+    mt.mission_count(GCS, 4, 0.0)
+    mt.mission_item(GCS, 0, plan[0], False, 0.1)  # RTO 0.3 s
+    assert requests(mt.tick(0.4)) == [1]  # backed off to 0.6 s
+    mt.mission_item(GCS, 1, plan[1], False, 0.95)  # 0.85 s after the first request: no sample
+    assert mt.next_deadline() == pytest.approx(0.95 + 0.6)
+    mt.mission_item(GCS, 2, plan[2], False, 1.05)  # sampled 0.1 s: the backoff is cleared
+    assert mt.next_deadline() == pytest.approx(1.05 + 0.25)  # SRTT 0.1, RTTVAR 0.0375
+
+
+def test_a_slow_uploader_is_never_waited_for_longer_than_retry_s(kind):
+    mt = machine(kind, retry_s=0.5)
+    plan = kind.plan(3)
     mt.mission_count(GCS, 3, 0.0)
-    assert requests(mt.tick(0.25)) == [0]
+    mt.mission_item(GCS, 0, plan[0], False, 3.0)
+    assert mt.next_deadline() == pytest.approx(3.5)
+
+
+def test_the_rerequest_waits_for_the_links_backlog_and_radio_slowdown(kind):
+    """What is queued ahead of the request at the link's bandwidth, and RADIO_STATUS's slowdown,
+    both measured when the request goes out, come on top of the timeout."""
+    backlog = {"gcs": 0.2}
+    mt = machine(kind, queued_s=lambda channel: backlog[channel],
+                 slowdown_s=lambda channel: 0.5 if channel == GCS.channel else 0.0)
+    mt.mission_count(GCS, 3, 0.0)
+    backlog["gcs"] = 0.0  # drained meanwhile: the deadline was fixed when the request was sent
+    assert mt.next_deadline() == pytest.approx(0.25 + 0.2 + 0.5)
+    assert mt.tick(0.94) == []
+    assert requests(mt.tick(0.95)) == [0]
+    assert mt.next_deadline() == pytest.approx(0.95 + 0.5 + 0.5)  # backed off; nothing queued now
+
+
+def test_the_round_trip_estimate_belongs_to_the_uploader_and_is_shared_by_the_types():
+    table = RttTable(initial_s=1.0, max_s=1.0)
+    mission = MissionTransfer(MISSION.store(700), rtt=table)
+    fence = MissionTransfer(FENCE.store(700), rtt=table)
+    upload(mission, MISSION.plan(3))  # answered at once: RTO at the 20 ms floor
+    fence.mission_count(GCS, 2, 5.0)
+    assert fence.next_deadline() == pytest.approx(5.02)
+    fence.mission_count(OTHER, 2, 6.0)  # DENIED: GCS owns the fence upload
+    fence.mission_ack(GCS, 6.0)
+    fence.mission_count(OTHER, 2, 7.0)  # another ground station: nothing measured yet
+    assert fence.next_deadline() == pytest.approx(8.0)
 
 
 def test_upload_aborts_after_8_s_without_a_valid_item(kind):
@@ -424,7 +505,7 @@ def test_upload_aborts_after_8_s_without_a_valid_item(kind):
 
 
 def test_the_abort_deadline_is_8_s_after_the_last_valid_item(kind):
-    mt = machine(kind, retry_s=10.0)
+    mt = machine(kind, retry_s=10.0, rtt=RttTable(initial_s=10.0, max_s=10.0))  # no re-request before
     mt.mission_count(GCS, 3, 0.0)
     assert mt.next_deadline() == pytest.approx(8.0)
     mt.mission_item(GCS, 0, kind.item(0), False, 5.0)

@@ -18,9 +18,17 @@ States and transitions (REFERENCE.md 7.1, with SPEC.md's improvements marked *):
     RECEIVING --cancel() (the daemon stops)--> IDLE, OPERATION_CANCELLED, old plan kept
 
 While RECEIVING: the next item is requested with MISSION_REQUEST (msg 40, as ArduPilot does)
-targeted at the owner on the channel the upload began on; no item for `retry_s` (1 s) plus the
-link's radio slowdown sends the request again, without limit until the 8 s abort. Requests from
-any other (sysid, compid) get DENIED (*ownership), items from the owner may come on any channel.
+targeted at the owner on the channel the upload began on. No item within the retransmission
+timeout sends the request again, without limit until the 8 s abort. *The timeout adapts (gcsd.rtt,
+RFC 6298): the uploader's (channel, sysid, compid) has a round-trip estimate, sampled as the time
+from a request sent once to the item that answers it (Karn's rule: no sample from a request sent
+again), doubled on a timeout (at most x4); 250 ms before the first sample; never more than
+`retry_s` (mission.retry_ms, ArduPilot's fixed 1 s). To it are added, when the request is sent, the
+time the link needs to transmit what is queued ahead of it (`queued_s(channel)`: the byte budget's
+backlog) and the link's RADIO_STATUS slowdown, as ArduPilot adds stream_slowdown_ms. So a loopback
+ground station gets a lost item asked for again within tens of milliseconds, a 57 600 baud radio
+only once the request and the item could have crossed it. Requests from any other
+(sysid, compid) get DENIED (*ownership), items from the owner may come on any channel.
 
 Result codes: fence/rally over a MAVLink1 link UNSUPPORTED ("Need mavlink2 for item transfer");
 count above the store's limit NO_SPACE ("Only N items are supported"); an item with seq beyond
@@ -46,6 +54,7 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from ..rtt import INITIAL_RTO_S, RttEstimator, RttTable
 from .items import MissionItem, item_float_message, item_int_message
 from .stores import PlanStore
 
@@ -104,7 +113,10 @@ class _Upload:
     plan_count: int  # items in the plan once this upload is in
     next_seq: int
     last_item_s: float
-    last_request_s: float
+    rtt: RttEstimator
+    request_s: float = 0.0  # when the request for next_seq was last sent
+    deadline_s: float = 0.0  # when to send it again
+    repeated: bool = False  # the request for next_seq went out more than once (Karn: no sample)
     items: list[MissionItem] = field(default_factory=list)
     warned_legacy: bool = False
 
@@ -118,11 +130,17 @@ class _Finished:
 
 class MissionTransfer:
     def __init__(self, store: PlanStore, retry_s: float = RETRY_S, abort_s: float = ABORT_S,
-                 slowdown_s: Callable[[Hashable], float] = lambda channel: 0.0) -> None:
+                 slowdown_s: Callable[[Hashable], float] = lambda channel: 0.0,
+                 queued_s: Callable[[Hashable], float] = lambda channel: 0.0,
+                 rtt: RttTable | None = None) -> None:
+        """`rtt`: the per-peer estimates, shared by the three types (a private table if None);
+        `slowdown_s` / `queued_s`: a channel's radio slowdown and byte-budget backlog, seconds."""
         self.store = store
         self.retry_s = retry_s
         self.abort_s = abort_s
         self.slowdown_s = slowdown_s
+        self.queued_s = queued_s
+        self.rtt = rtt if rtt is not None else RttTable(initial_s=INITIAL_RTO_S, max_s=retry_s)
         self.mission_type = store.mission_type
         self._upload: _Upload | None = None
         self._finished: _Finished | None = None
@@ -146,8 +164,7 @@ class MissionTransfer:
         up = self._upload
         if up is None:
             return None
-        rerequest_s = up.last_request_s + self.retry_s + self.slowdown_s(up.channel)
-        return min(rerequest_s, up.last_item_s + self.abort_s)
+        return min(up.deadline_s, up.last_item_s + self.abort_s)
 
     # --- upload ------------------------------------------------------------------------------
     def mission_count(self, origin: Origin, count: int, now: float) -> list[Output]:
@@ -200,11 +217,13 @@ class MissionTransfer:
             return out + [self._ack_owner(up, result)]
         up.items.append(item)
         up.last_item_s = now
+        if not up.repeated:
+            up.rtt.sample(now - up.request_s)
         if seq == up.end:
             return out + self._complete(up)
         up.next_seq = seq + 1
-        up.last_request_s = now
-        return out + [self._request(up)]
+        up.repeated = False
+        return out + [self._request(up, now)]
 
     def mission_ack(self, origin: Origin, now: float) -> list[Output]:
         """A MISSION_ACK from the uploader ends its upload (cancelled); anything else is ignored."""
@@ -315,9 +334,10 @@ class MissionTransfer:
             self._upload = None
             return [Text(M.MAV_SEVERITY_WARNING, f"{self.store.label} upload timeout", up.channel),
                     self._ack_owner(up, M.MAV_MISSION_OPERATION_CANCELLED)]
-        if now >= up.last_request_s + self.retry_s + self.slowdown_s(up.channel):
-            up.last_request_s = now
-            return [self._request(up)]
+        if now >= up.deadline_s:
+            up.rtt.timed_out()
+            up.repeated = True
+            return [self._request(up, now)]
         return []
 
     # --- internals ---------------------------------------------------------------------------
@@ -331,9 +351,10 @@ class MissionTransfer:
 
     def _start(self, origin: Origin, start: int, end: int, partial: bool, plan_count: int,
                now: float) -> list[Output]:
-        up = _Upload(origin.node, origin.channel, start, end, partial, plan_count, start, now, now)
+        rtt = self.rtt.get((origin.channel, origin.node))
+        up = _Upload(origin.node, origin.channel, start, end, partial, plan_count, start, now, rtt)
         self._upload = up
-        return [self._request(up)]
+        return [self._request(up, now)]
 
     def _complete(self, up: _Upload) -> list[Output]:
         self._upload = None
@@ -378,7 +399,11 @@ class MissionTransfer:
     def _save_failed(self, exc: OSError) -> Text:
         return Text(M.MAV_SEVERITY_ERROR, f"{self.store.label} not saved: {exc.strerror or exc}")
 
-    def _request(self, up: _Upload) -> Send:
+    def _request(self, up: _Upload, now: float) -> Send:
+        """The request for up.next_seq, sent now: its re-request deadline is set here."""
+        up.request_s = now
+        behind_s = self.queued_s(up.channel) + self.slowdown_s(up.channel)
+        up.deadline_s = now + up.rtt.timeout_s(behind_s)
         return Send(up.channel, M.MAVLink_mission_request_message(*up.owner, up.next_seq, self.mission_type))
 
     def _count(self, origin: Origin) -> Send:

@@ -7,9 +7,13 @@ answers UNSUPPORTED): DENIED if another node is uploading any of them, else one 
 What the machines return is written out here: `Send` with `node.reply` on its channel, `Text` as
 STATUSTEXT (on that channel, or every ground station), `PlanChanged` logged and MISSION_CURRENT
 pushed. While an upload requests items on a link, that link's streams run x4 slower
-(`Link.set_slow("mission", ...)`). The machines' timers (re-request after `mission.retry_ms`,
+(`Link.set_slow("mission", ...)`). The machines' timers (re-request after the uploader's
+adaptive timeout, gcsd.rtt, at most `mission.retry_ms` plus the link's backlog and radio slowdown;
 abort after 8 s) run from the node's send pass: `pending(channel, now, send)` ticks them and
-returns their next deadline, so the channel task wakes in time.
+returns their next deadline, so the channel task wakes in time. One RttTable serves the three
+types, so a ground station's fence upload starts with what its mission upload measured. A
+channel's backlog is its byte budget's deficit at its bandwidth (a full token bucket: nothing
+queued; an empty one: 100 ms of traffic still in the radio).
 
 Persistence: `<state_dir>/mission.waypoints`, `fence.waypoints`, `rally.waypoints` (QGC WPL 110),
 written with gcsd.atomic (temporary file, fsync, rename, fsync of the directory) *before* a plan
@@ -42,6 +46,7 @@ from ..mission import wpl
 from ..mission.items import MissionItem, from_item_float, from_item_int
 from ..mission.stores import FenceStore, MissionStore, PlanStore, RallyStore
 from ..mission.transfer import MissionTransfer, Origin, PlanChanged, Send, Text
+from ..rtt import RttTable
 from . import Incoming, Service
 from .commands import CommandRequest
 
@@ -74,8 +79,11 @@ class MissionService(Service):
             self._load(store)
         if node.state.has_home:
             self.mission.home_changed()
+        retry_s = config.retry_ms / 1000.0
+        self.rtt = RttTable(max_s=retry_s)  # starts at INITIAL_RTO_S, never beyond retry_ms
         self.transfers = {
-            s.mission_type: MissionTransfer(s, retry_s=config.retry_ms / 1000.0, slowdown_s=self._slowdown_s)
+            s.mission_type: MissionTransfer(s, retry_s=retry_s, slowdown_s=self._slowdown_s,
+                                            queued_s=self._queued_s, rtt=self.rtt)
             for s in stores
         }
         self.guided_handler: Callable[[MissionItem, int], bool] | None = None
@@ -279,6 +287,9 @@ class MissionService(Service):
                     self.complete = False
                     self._push_current()
         self._update_slow()
+        for t in self.transfers.values():
+            if t.receiving:  # a request went out or is due: its deadline may be sooner than the
+                self.node.wake(t.upload_channel)  # channel task's next pass (tens of ms on loopback)
 
     def _push_current(self) -> None:
         for link in self.node.links:
@@ -294,6 +305,12 @@ class MissionService(Service):
 
     def _slowdown_s(self, channel) -> float:
         return self.node.link(channel).scheduler.slowdown_ms / 1000.0
+
+    @staticmethod
+    def _queued_s(channel) -> float:
+        """Time to transmit what the link's byte budget says is still queued (0: unlimited)."""
+        budget = channel.budget
+        return 0.0 if budget is None else channel.budget_wait_s(int(budget.capacity))
 
     # --- files -------------------------------------------------------------------------------
     def _path(self, name: str) -> Path | None:
