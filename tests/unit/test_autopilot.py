@@ -174,6 +174,7 @@ def test_rc_override_moves_a_copter_only_from_the_gcs_sysid(tmp_path):
     h.send(M.MAVLink_rc_channels_override_message(1, 1, *override))
     h.run(2.0)
     assert h.state.groundspeed_ms > 1.0
+    h.set_param("FS_THR_ENABLE", 0)  # no RC failsafe when the overrides lapse (test_rc_params.py)
     h.run(4.0)  # RC_OVERRIDE_TIME 3 s: released, it stops
     assert h.state.groundspeed_ms < 0.5
 

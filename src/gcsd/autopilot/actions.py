@@ -204,29 +204,25 @@ class Actions:
                 s.rc_override.pop(n, None)
             elif RC_MIN <= pwm <= RC_MAX:
                 s.rc_override[n] = pwm
+                self.rc.used = True  # from now on their lapse is RC loss (gcsd.vehicles.rc)
         self._rc_override_s = now
 
-    def sticks(self, now: float) -> tuple[float, float, float, float]:
-        """Roll, pitch, throttle, yaw in -1..1 from RC overrides (centred on each RCn_TRIM)."""
+    def rc_tick(self, now: float) -> None:
+        """Each tick: overrides lapse after RC_OVERRIDE_TIME; the flight-mode switch is read."""
         s = self.state
         hold_s = float(self.params.get("RC_OVERRIDE_TIME")) if "RC_OVERRIDE_TIME" in self.params else 3.0
         since = getattr(self, "_rc_override_s", None)
         if s.rc_override and since is not None and hold_s >= 0 and now - since > hold_s:
             s.rc_override.clear()
-        if not s.rc_override:
-            return (0.0, 0.0, 0.0, 0.0)
-        get = self.params.get
-        out = []
-        for n in (1, 2, 3, 4):
-            pwm = s.rc_override.get(n)
-            trim = get(f"RC{n}_TRIM")
-            if pwm is None:
-                out.append(0.0)
-                continue
-            span = (get(f"RC{n}_MAX") - trim) if pwm >= trim else (trim - get(f"RC{n}_MIN"))
-            value = (pwm - trim) / span if span > 0 else 0.0
-            out.append(max(-1.0, min(1.0, -value if get(f"RC{n}_REVERSED") else value)))
-        return out[0], out[1], out[2], out[3]
+        mode = self.rc.mode_switch(self.params, s.rc_override, now)
+        control = getattr(self.node, "control", None)
+        if mode is not None and control is not None:
+            control.set_mode(mode)  # refused with a STATUSTEXT, as a ground station's request
+
+    def sticks(self, now: float) -> tuple[float, float, float, float]:
+        """Roll, pitch, throttle, yaw in -1..1 from RC overrides: RCMAP_*, RCn_TRIM/_DZ/_MIN/_MAX/
+        _REVERSED as ArduPilot reads them (gcsd.vehicles.rc)."""
+        return self.rc.sticks(self.params, self.state.rc_override)
 
     # --- the mission runner's view -----------------------------------------------------------
     def mission_items(self):

@@ -28,6 +28,7 @@ from ..sim import MAX_STEP_S, SimulatedVehicle
 from ..sim.geo import bearing_deg, distance_m, ne_m
 from ..sim.state import Kind, Setpoint
 from ..vehicles.common import environment
+from ..vehicles.rc import RcInput
 from .actions import Actions
 from .failsafe import Failsafes
 from .mission import MissionRunner
@@ -63,6 +64,7 @@ class Autopilot(Actions):
         self.rtl = Rtl(self)
         self.outputs = Outputs(self.state, self.params)
         self.failsafes = Failsafes()
+        self.rc = RcInput()
         self._mode = None
         self._armed = self.state.armed
         self.behaviour = B.IDLE
@@ -130,10 +132,11 @@ class Autopilot(Actions):
         if self._dirty:
             self._reload()
         self.sync()
+        self.rc_tick(now)
         control = getattr(self.node, "control", None)
         last_seen = control.gcs_last_seen_s if control is not None else None
         for event in self.failsafes.check(s, self.settings, self.params, last_seen, now, self._fence_items(),
-                                          self._sim_ms):
+                                          self._sim_ms, rc_lost=self.rc.lost(self.params, s.rc_override)):
             self.node.send_text(event.severity, event.text)
             if event.action is not None:
                 self.act(event.action, f"{event.text}")
@@ -363,6 +366,7 @@ class Autopilot(Actions):
         s.servo_override.clear()
         s.relays[:] = [False] * len(s.relays)
         self.failsafes = Failsafes()
+        self.rc = RcInput()
         self.outputs = Outputs(s, self.params)
         self.runner = MissionRunner(self)
         self.node.mission.mission.set_current(0)

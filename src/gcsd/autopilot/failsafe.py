@@ -12,6 +12,10 @@ condition starts and is reported cleared when it ends, as ArduPilot's do:
   disarmed (a battery does not recover).
 - Fence: armed, enabled, outside (gcsd.autopilot.fence); breach count and time kept for
   FENCE_STATUS in the state.
+- Radio (RC): `rc_lost` (gcsd.vehicles.rc: overrides lapsed after being used, or throttle
+  below FS_THR_VALUE) while armed and the vehicle's throttle failsafe enabled: "Radio
+  Failsafe", the vehicle's action (DISARM on the ground); "Radio Failsafe Cleared" when RC
+  returns.
 """
 
 from __future__ import annotations
@@ -36,20 +40,22 @@ class Failsafes:
         self.gcs_lost = False
         self.battery_level = 0  # 0 ok, 1 low, 2 critical
         self.fence_breached: set[int] = set()
+        self.radio_lost = False
 
     def check(self, s, settings: Settings, params, gcs_last_seen_s: float | None, now: float,
-              fence_items, sim_time_ms: int) -> list[Event]:
+              fence_items, sim_time_ms: int, rc_lost: bool = False) -> list[Event]:
         events: list[Event] = []
         if not s.armed:
             self.battery_level = 0
             self.fence_breached = set()
         events += self._gcs(s, settings, gcs_last_seen_s, now)
+        events += self._radio(s, settings, rc_lost)
         if s.armed:
             events += self._battery(s, settings, params)
             if "FENCE_ENABLE" in params:
                 events += self._fence(s, settings, params, fence_items, sim_time_ms)
-        s.failsafe = "GCS" if self.gcs_lost else ("Battery" if self.battery_level else (
-            "Fence" if self.fence_breached else None))
+        s.failsafe = "GCS" if self.gcs_lost else ("Radio" if self.radio_lost else (
+            "Battery" if self.battery_level else ("Fence" if self.fence_breached else None)))
         return events
 
     def _gcs(self, s, settings: Settings, last_seen: float | None, now: float) -> list[Event]:
@@ -64,6 +70,19 @@ class Failsafes:
         if not lost and self.gcs_lost:
             self.gcs_lost = False
             return [Event(M.MAV_SEVERITY_INFO, "GCS Failsafe Cleared")]
+        return []
+
+    def _radio(self, s, settings: Settings, rc_lost: bool) -> list[Event]:
+        if settings.radio_failsafe is None:
+            self.radio_lost = False
+            return []
+        if rc_lost and not self.radio_lost and s.armed:
+            self.radio_lost = True
+            action = DISARM if s.on_ground else settings.radio_failsafe
+            return [Event(M.MAV_SEVERITY_WARNING, "Radio Failsafe", action)]
+        if not rc_lost and self.radio_lost:
+            self.radio_lost = False
+            return [Event(M.MAV_SEVERITY_INFO, "Radio Failsafe Cleared")]
         return []
 
     def _battery(self, s, settings: Settings, params) -> list[Event]:

@@ -47,6 +47,7 @@ class Settings:
     land_disarm_delay_s: float = 0.0  # after touchdown in an autonomous landing
     mission_end: str | None = None  # mode to switch to at the end of the mission; None: hold in AUTO
     gcs_failsafe: str | None = None  # mode on GCS heartbeat loss; None: disabled
+    radio_failsafe: str | None = None  # mode on RC loss (gcsd.vehicles.rc); None: disabled
     gcs_timeout_s: float = 5.0
     battery_low: str | None = None  # mode (or DISARM) on a low battery; None: warn only
     battery_critical: str | None = None

@@ -24,6 +24,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import Behaviour
 from ..sim.geo import offset
+from ..vehicles.rc import mapped_channel
 from . import Incoming, Service
 from .commands import CommandRequest
 
@@ -253,10 +254,11 @@ class FlightService(Service):
             span = (get(f"RC{n}_MAX") - trim) if value >= 0 else (trim - get(f"RC{n}_MIN"))
             return int(trim + max(-1.0, min(1.0, value)) * span)
 
-        throttle_min, throttle_max = get("RC3_MIN"), get("RC3_MAX")
-        values = {1: pwm(1, m.y / 1000.0), 2: pwm(2, -m.x / 1000.0),
-                  3: int(throttle_min + max(0, min(1000, m.z)) / 1000.0 * (throttle_max - throttle_min)),
-                  4: pwm(4, m.r / 1000.0)}
+        roll, pitch, throttle, yaw = (mapped_channel(self.node.params, i) for i in range(4))  # RCMAP_*
+        throttle_min, throttle_max = get(f"RC{throttle}_MIN"), get(f"RC{throttle}_MAX")
+        values = {roll: pwm(roll, m.y / 1000.0), pitch: pwm(pitch, -m.x / 1000.0),
+                  throttle: int(throttle_min + max(0, min(1000, m.z)) / 1000.0 * (throttle_max - throttle_min)),
+                  yaw: pwm(yaw, m.r / 1000.0)}
         self.ap.rc_override(values, inc.now)
 
     def handle_GLOBAL_POSITION_INT(self, inc: Incoming) -> None:

@@ -24,11 +24,14 @@ PARAMS = (
     "WPNAV_SPEED", "WPNAV_SPEED_UP", "WPNAV_SPEED_DN", "WPNAV_RADIUS", "WPNAV_ACCEL", "RTL_ALT", "RTL_ALT_FINAL",
     "RTL_SPEED", "RTL_LOIT_TIME", "LAND_SPEED", "LAND_ALT_LOW", "LOIT_SPEED", "ANGLE_MAX", "ATC_SLEW_YAW",
     "CIRCLE_RADIUS", "CIRCLE_RATE", "GUID_TIMEOUT", "MOT_THST_HOVER", "FS_GCS_ENABLE", "FS_GCS_TIMEOUT",
-    "DISARM_DELAY",
+    "DISARM_DELAY", "FS_THR_ENABLE",
 ) + common.FAILSAFE_PARAMS
 
 GCS_ACTIONS = {1: "RTL", 2: "RTL", 3: "RTL", 4: "RTL", 5: "LAND", 6: "LAND", 7: "LAND"}
 BATTERY_ACTIONS = {1: "LAND", 2: "RTL", 3: "RTL", 4: "RTL", 5: DISARM}
+# FS_THR_ENABLE: 1 RTL, 2 RTL (removed in 4.0: ArduPilot treats it as 1), 3 LAND,
+# 4 SmartRTL or RTL, 5 SmartRTL or LAND, 6 DO_LAND_START or RTL, 7 BRAKE then LAND
+RADIO_ACTIONS = {1: "RTL", 2: "RTL", 3: "LAND", 4: "SMART_RTL", 5: "SMART_RTL", 6: "RTL", 7: "LAND"}
 FENCE_ACTIONS = {1: "RTL", 2: "LAND", 3: "RTL", 4: "BRAKE", 5: "RTL", 6: "LAND", 7: "LAND"}
 
 
@@ -46,6 +49,7 @@ def settings(get) -> Settings:
         rtl_final_alt_m=cm("RTL_ALT_FINAL"), rtl_loiter_s=float(get("RTL_LOIT_TIME")) / 1000.0,
         rtl_speed_ms=cm("RTL_SPEED") or None, takeoff_alt_m=10.0,
         gcs_failsafe=common.action(GCS_ACTIONS, get("FS_GCS_ENABLE")), gcs_timeout_s=float(get("FS_GCS_TIMEOUT")),
+        radio_failsafe=common.action(RADIO_ACTIONS, get("FS_THR_ENABLE")),
         battery_low=common.action(BATTERY_ACTIONS, get("BATT_FS_LOW_ACT")),
         battery_critical=common.action(BATTERY_ACTIONS, get("BATT_FS_CRT_ACT")),
         fence_action=common.action(FENCE_ACTIONS, get("FENCE_ACTION")),

@@ -25,11 +25,15 @@ _by_name = {v: k for k, v in _modes.items()}
 PARAMS = (
     "AIRSPEED_CRUISE", "AIRSPEED_MIN", "AIRSPEED_MAX", "TRIM_THROTTLE", "ROLL_LIMIT_DEG", "PTCH_LIM_MAX_DEG",
     "PTCH_LIM_MIN_DEG", "WP_RADIUS", "WP_LOITER_RAD", "RTL_RADIUS", "RTL_ALTITUDE", "TKOFF_ALT", "TECS_CLMB_MAX",
-    "TECS_SINK_MAX", "LAND_DISARMDELAY", "FS_GCS_ENABL", "FS_LONG_TIMEOUT",
+    "TECS_SINK_MAX", "LAND_DISARMDELAY", "FS_GCS_ENABL", "FS_LONG_TIMEOUT", "THR_FAILSAFE", "FS_LONG_ACTN",
 ) + common.FAILSAFE_PARAMS
 
 BATTERY_ACTIONS = {1: "RTL", 2: "RTL", 3: DISARM, 4: "RTL", 5: "RTL", 6: "LOITER"}
 FENCE_ACTIONS = {1: "RTL", 2: "GUIDED", 3: "GUIDED", 4: "RTL", 5: "LOITER", 6: "LOITER"}
+# THR_FAILSAFE 1 (2: no failsafe action): FS_LONG_ACTN 0 continue (gcsd: RTL), 1 RTL, 2 glide
+# (FBWA), 3 parachute (gcsd: RTL), 4 AUTO. The short failsafe (FS_SHORT_ACTN after
+# FS_SHORT_TIMEOUT) is not modelled: the long action at once.
+RADIO_ACTIONS = {0: "RTL", 1: "RTL", 2: "FBWA", 3: "RTL", 4: "AUTO"}
 
 
 def settings(get) -> Settings:
@@ -50,6 +54,7 @@ def settings(get) -> Settings:
         rtl_loiter_s=0.0, takeoff_alt_m=float(get("TKOFF_ALT")),
         land_disarm_delay_s=float(get("LAND_DISARMDELAY")), mission_end="RTL",
         gcs_failsafe="RTL" if get("FS_GCS_ENABL") else None, gcs_timeout_s=float(get("FS_LONG_TIMEOUT")),
+        radio_failsafe=common.action(RADIO_ACTIONS, get("FS_LONG_ACTN")) if get("THR_FAILSAFE") == 1 else None,
         battery_low=common.action(BATTERY_ACTIONS, get("BATT_FS_LOW_ACT")),
         battery_critical=common.action(BATTERY_ACTIONS, get("BATT_FS_CRT_ACT")),
         fence_action=common.action(FENCE_ACTIONS, get("FENCE_ACTION")),

@@ -22,13 +22,16 @@ _by_name = {v: k for k, v in _modes.items()}
 # ArduRover 4.6's parameters this module's settings() reads (all of them: params/data/rover.tsv).
 PARAMS = (
     "CRUISE_SPEED", "CRUISE_THROTTLE", "WP_SPEED", "WP_RADIUS", "LOIT_RADIUS", "ATC_STR_RAT_MAX", "ATC_ACCEL_MAX",
-    "RTL_SPEED", "MIS_DONE_BEHAVE", "FS_GCS_ENABLE", "FS_TIMEOUT",
+    "RTL_SPEED", "MIS_DONE_BEHAVE", "FS_GCS_ENABLE", "FS_TIMEOUT", "FS_THR_ENABLE", "FS_ACTION",
 ) + common.FAILSAFE_PARAMS
 
 GCS_ACTIONS = {1: "RTL", 2: "HOLD"}
 BATTERY_ACTIONS = {1: "RTL", 2: "HOLD", 3: "RTL", 4: "HOLD", 5: DISARM}
 FENCE_ACTIONS = {1: "RTL", 2: "HOLD", 3: "RTL", 4: "HOLD"}
 MISSION_END = {0: None, 1: "LOITER", 2: "ACRO", 3: "MANUAL"}
+# FS_ACTION (with FS_THR_ENABLE on): 0 nothing, 1 RTL, 2 HOLD, 3 SmartRTL or RTL, 4 SmartRTL or
+# HOLD, 5 terminate (gcsd: disarm)
+RADIO_ACTIONS = {1: "RTL", 2: "HOLD", 3: "SMART_RTL", 4: "SMART_RTL", 5: DISARM}
 
 
 def settings(get) -> Settings:
@@ -44,6 +47,7 @@ def settings(get) -> Settings:
         limits=limits, rtl_alt_m=-1.0, rtl_lands=False, rtl_loiter_s=0.0, rtl_speed_ms=float(get("RTL_SPEED")) or None,
         mission_end=MISSION_END.get(int(get("MIS_DONE_BEHAVE"))), ignore_alt_for_waypoints=True,
         gcs_failsafe=common.action(GCS_ACTIONS, get("FS_GCS_ENABLE")), gcs_timeout_s=float(get("FS_TIMEOUT")),
+        radio_failsafe=common.action(RADIO_ACTIONS, get("FS_ACTION")) if get("FS_THR_ENABLE") else None,
         battery_low=common.action(BATTERY_ACTIONS, get("BATT_FS_LOW_ACT")),
         battery_critical=common.action(BATTERY_ACTIONS, get("BATT_FS_CRT_ACT")),
         fence_action=common.action(FENCE_ACTIONS, get("FENCE_ACTION")),
