@@ -4,7 +4,7 @@ one vehicle's cost.
     python -m bench                      # everything (about 5 minutes on an idle machine)
     python -m bench --quick              # smoke run (about 1 minute)
     python -m bench throughput latency   # just these; also: harness, vehicle, params, param_flood, mission,
-                                         # signing, swarm, ftp
+                                         # signing, swarm, ftp, fleet (the MQTT fleet, bench/fleet.py)
     python -m bench --routers mavproxy   # only some routers (default gcsd,mavlink-router,mavproxy)
 
 mavlink-router is the binary in $GCSD_MAVLINK_ROUTER (or mavlink-routerd on PATH); without it the
@@ -32,6 +32,7 @@ from pathlib import Path as FsPath
 if __package__ in (None, ""):  # run as a script: python bench/run.py
     sys.path.insert(0, str(FsPath(__file__).resolve().parent.parent))
 
+from bench import fleet as bench_fleet  # noqa: E402
 from bench import ftp as bench_ftp  # noqa: E402
 from bench import measure  # noqa: E402
 from bench import mission as bench_mission  # noqa: E402
@@ -58,7 +59,7 @@ from bench.routers import (  # noqa: E402
 )
 
 WHAT = ("harness", "throughput", "latency", "vehicle", "params", "param_flood", "mission", "signing", "swarm",
-        "ftp")
+        "ftp", "fleet")
 ROUTERS = {"gcsd": "gcsd", "mavlink-router": "mavlink-router", "mavproxy": "MAVProxy"}  # name -> column
 LATENCY_RATE = 1000
 
@@ -264,6 +265,8 @@ class Runner:
             self.res["swarm"] = bench_swarm.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
         if "ftp" in a.what:  # bench/ftp.py: 10 MB burst read and param.pck, against MAVSDK's ftp_server
             self.res["ftp"] = bench_ftp.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
+        if "fleet" in a.what:  # bench/fleet.py: vehicle-side processes -> Mosquitto -> ground side
+            self.res["fleet"] = bench_fleet.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
 
     def harness(self) -> None:
         a = self.a
@@ -454,6 +457,8 @@ class Runner:
         if self.res.get("ftp"):
             out += ["", "FTP: 10 MB burst read and @PARAM/param.pck, gcsd against MAVSDK's ftp_server (bench/ftp.py)",
                     "", bench_ftp.table(self.res["ftp"])]
+        if self.res.get("fleet"):
+            out += ["", bench_fleet.table(self.res["fleet"])]
         return "\n".join(out)
 
 

@@ -39,12 +39,17 @@ adds a Message object and an asyncio.Queue hop per frame. paho-mqtt is the Eclip
 reference client (MQTT 3.1.1 and 5, TLS, maintained since 2014, 2.x API); the adapter below is
 the ~100 lines of socket hooks aiomqtt itself uses. MQTT 3.1.1 is spoken: every broker and
 cloud IoT service accepts it, and nothing here needs a v5 feature.
+
+Latency: the socket is TCP_NODELAY (paho leaves Nagle on, which with delayed ACKs holds small
+frames for tens of milliseconds); brokers should do the same for their clients (Mosquitto:
+`set_tcp_nodelay true`, as in sitl/fleet/mosquitto.conf).
 """
 
 from __future__ import annotations
 
 import asyncio
 import secrets
+import socket
 import ssl
 import weakref
 from collections.abc import Callable, Iterable
@@ -175,6 +180,8 @@ class MqttLink:
             if sock is None:
                 raise OSError("connection closed during connect")
             self._fd = sock.fileno()
+            # one small frame per message: Nagle + delayed ACK would hold frames for up to 40 ms
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             client.on_socket_register_write = self._register_write
             client.on_socket_unregister_write = self._unregister_write
             self.loop.add_reader(self._fd, self._read_ready)

@@ -45,6 +45,7 @@ class Mosquitto:
             f"user {getpass.getuser()}\n"  # started as root it would switch to "mosquitto", who cannot read our files
             f"allow_anonymous {'true' if anonymous else 'false'}\n"
             "persistence false\n"
+            "set_tcp_nodelay true\n"  # MAVLink frames are small and latency matters (sitl/fleet/mosquitto.conf)
             "log_dest stderr\n"
             "log_type error\n"
             "log_type warning\n"

@@ -220,7 +220,11 @@ def test_companion_bridge_reached_from_the_ground_side_through_the_broker(broker
         r = wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and r.msg.param_id == "RC7_TRIM", 3.0, mark)
         assert r is not None and r.src == (7, 1) and r.msg.param_value == 1555.0
         assert param_value(gcs, (7, 1), b"RC7_TRIM") == 1555.0
-        assert "RC7_TRIM" in (tmp_path / "fc" / "mav.parm").read_text(), "saved by the flight controller"
+        saved = tmp_path / "fc" / "mav.parm"
+        deadline = time.monotonic() + 5.0  # writes are batched, at most one file write per second
+        while "RC7_TRIM" not in saved.read_text() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert "RC7_TRIM" in saved.read_text(), "saved by the flight controller"
         # the companion's own component answers for itself on the same path
         assert param_value(gcs, (7, 191), b"SYSID_THISMAV") == 7.0
     finally:
