@@ -127,6 +127,7 @@ class ChannelConfig:
     private: bool = False
     bandwidth: int | None = None  # bytes/s; None is unlimited, except serial: it resolves to baud // 10
     max_peers: int = DEFAULT_MAX_PEERS  # udp-server/tcp-server: ground stations served at once
+    broadcast: bool = False  # udp-client: send to the (broadcast) address until a station answers (discovery.py)
     mqtt: MqttConfig | None = None  # type mqtt: broker, topic, role, ... (config_mqtt.py)
 
     def __post_init__(self) -> None:
@@ -263,7 +264,7 @@ SERIAL_CONTROL_PORTS = ("telem1", "telem2", "gps1", "gps2", *(f"serial{n}" for n
 _VEHICLE_KEYS = ("type", "sysid", "compid", "count", "home", "speedup")
 _MISSION_KEYS = ("max_items", "max_fence", "max_rally", "retry_ms")
 _CHANNEL_KEYS = ("name", "type", "address", "device", "baud", "mavlink", "streams", "options",
-                 "private", "bandwidth", "max_peers", *MQTT_KEYS)
+                 "private", "bandwidth", "max_peers", "broadcast", *MQTT_KEYS)
 _NETWORK_TYPES = tuple(t for t in CHANNEL_TYPES if t not in ("serial", "mqtt"))
 _SIGNING_KEY = re.compile(f"[0-9a-fA-F]{{{SIGNING_KEY_HEX_CHARS}}}")
 _ADDRESS = re.compile(r"(?:\[(?P<ipv6>[^\]\x00-\x1f]+)\]|(?P<host>[^:\s\[\]\x00-\x1f]+)):(?P<port>[0-9]{1,5})",
@@ -450,6 +451,8 @@ def _channel(r: _Reader, c: _Section) -> ChannelConfig:
         r.problem(c["device"], "required for type serial")
     if "max_peers" in c and channel_type not in _SERVER_TYPES:
         r.problem(c["max_peers"], "only used by udp-server and tcp-server channels")
+    if "broadcast" in c and channel_type != "udp-client":
+        r.problem(c["broadcast"], "only used by udp-client channels")
     streams = r.section(c["streams"], STREAM_NAMES)
     return ChannelConfig(
         name=r.text(c["name"], ""), type=channel_type, address=address, device=device,
@@ -461,6 +464,7 @@ def _channel(r: _Reader, c: _Section) -> ChannelConfig:
         private=r.boolean(c["private"], False),
         bandwidth=r.integer(c["bandwidth"], None, 1, nullable=True),
         max_peers=r.integer(c["max_peers"], DEFAULT_MAX_PEERS, 1, MAX_MAX_PEERS),
+        broadcast=r.boolean(c["broadcast"], False),
         mqtt=read_mqtt(r, c, channel_type),
     )
 
