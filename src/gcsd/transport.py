@@ -11,7 +11,9 @@ socket buffer is logged and counted; the channel reconnects, and the daemon keep
 
 - udp-server: one bound socket; an address that sends a good frame becomes a peer (see
   channel.py, "Admission"), answered until silent 30 s.
-- udp-client: one connected socket; the remote is the peer from the start.
+- udp-client: one connected socket; the remote is the peer from the start. With `broadcast`,
+  SO_BROADCAST and the address is a broadcast address until a ground station answers with a
+  good frame, then that station only (gcsd.discovery, ArduPilot's udp:ADDR:bcast).
 - tcp-server: every accepted connection is a peer (served at once, or after its first good
   frame when the channel needs signatures).
 - tcp-client, serial: one peer while connected; reconnect after loss.
@@ -30,6 +32,7 @@ from collections.abc import Callable
 import structlog
 
 from .channel import Channel
+from .discovery import BroadcastLock
 
 log = structlog.get_logger("gcsd.transport")
 
@@ -53,10 +56,12 @@ class _Datagram:
 
     DRAIN_BATCH = 64
 
-    def __init__(self, channel: Channel, sock: socket.socket, accept_new_peers: bool) -> None:
+    def __init__(self, channel: Channel, sock: socket.socket, accept_new_peers: bool,
+                 bcast: BroadcastLock | None = None) -> None:
         self.channel = channel
         self.sock = sock
         self.accept_new_peers = accept_new_peers
+        self.bcast = bcast
         self.loop = asyncio.get_running_loop()
         self.closed = self.loop.create_future()
         self.loop.add_reader(sock.fileno(), self._read_ready)
@@ -89,10 +94,40 @@ class _Datagram:
                 continue
             peer = peers.get(addr)
             if peer is None:
+                if self.bcast is not None:
+                    self._from_lan(addr, data, now)
+                    continue
                 if not self.accept_new_peers:
                     continue
                 peer = channel.stranger(addr, now)
             channel.receive(peer, data, now, datagram=True)
+
+    # --- broadcast discovery (gcsd.discovery): one peer, keyed by the broadcast address ---------
+    def broadcast_writer(self) -> Callable[[bytes], bool]:
+        sendto, bcast, clock, name = self.sock.sendto, self.bcast, self.channel.clock, self.channel.name
+
+        def write(data: bytes) -> bool:
+            dest, released = bcast.destination(clock())
+            if released:
+                log.info("broadcast_resumed", channel=name, silent_s=bcast.silent_s)
+            try:
+                sendto(data, dest)
+            except OSError:
+                return False
+            return True
+
+        return write
+
+    def _from_lan(self, addr, data: bytes, now: float) -> None:
+        """A datagram on a broadcast channel: read if it is from the station (or none yet); its
+        first good frame locks the channel onto its sender."""
+        bcast = self.bcast
+        peer = self.channel.peers.get(bcast.address)
+        if peer is None or not bcast.accepts(addr):
+            return
+        self.channel.receive(peer, data, now, datagram=True)
+        if peer.last_rx_s == now and bcast.heard(addr, now):  # a frame was accepted
+            log.info("broadcast_answered", channel=self.channel.name, station=f"{addr[0]}:{addr[1]}")
 
     def close(self) -> None:
         if self.sock.fileno() >= 0:
@@ -157,12 +192,15 @@ async def _open(channel: Channel):
             sock.bind((host, port))
         else:
             sock.bind(("127.0.0.1" if host.startswith("127.") else "0.0.0.0", 0))
+            if cfg.broadcast:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
         sock.setblocking(False)
-        proto = _Datagram(channel, sock, accept_new_peers=server)
+        addr = None if server else (socket.gethostbyname(host), port)
+        bcast = BroadcastLock(addr) if not server and cfg.broadcast else None
+        proto = _Datagram(channel, sock, accept_new_peers=server, bcast=bcast)
         channel.local_address = sock.getsockname()[:2]
         if not server:
-            addr = (socket.gethostbyname(host), port)
-            channel.add_peer(addr, proto.writer(addr))
+            channel.add_peer(addr, proto.broadcast_writer() if bcast else proto.writer(addr))
             log.info("peer_joined", channel=channel.name, peer=f"{addr[0]}:{addr[1]}")
         return proto.close, proto.closed
     if kind == "tcp-server":
