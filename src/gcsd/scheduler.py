@@ -70,6 +70,8 @@ class SendScheduler:
                     self._specials[msgid] = _Special(interval_ms, now)
                 else:
                     special.interval_ms = interval_ms
+                    # a shorter interval applies now, not after the old, longer wait
+                    special.next_due_s = min(special.next_due_s, now + interval_ms / 1000.0)
             return
         current = self._bucket_of.get(msgid)
         if current is not None and self._buckets[current].interval_ms == interval_ms:

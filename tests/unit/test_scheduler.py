@@ -70,6 +70,17 @@ def test_heartbeat_special_slot_runs_at_its_own_interval():
     assert count(rec, 30) == 99
 
 
+def test_a_shorter_heartbeat_interval_applies_at_once_not_after_the_old_wait():
+    # found by the fuzz suite: HEARTBEAT set to 10 s, then back to the default 1 s, stayed silent ~10 s
+    s = SendScheduler(0.0, special_ids=(HB,))
+    s.set_interval(HB, 10_000, 0.0)
+    rec = Recorder()
+    run_for(s, rec, 0.0, 0.5)
+    s.set_interval(HB, 1000, 0.5)
+    run_for(s, rec, 0.5, 3.0)
+    assert [t for t, m in rec.sent if m == HB] == [0.0, 1.5, 2.5]
+
+
 def test_pushed_message_is_sent_once_before_buckets():
     s = SendScheduler(0.0)
     s.set_interval(30, 100, 0.0)
