@@ -181,8 +181,9 @@ class Config:
     mission: MissionConfig = MissionConfig()
     ftp: FtpConfig = FtpConfig()
     signing: SigningConfig = SigningConfig()
-    channels: tuple[ChannelConfig, ...] = (
-        ChannelConfig(name="gcs", type="udp-server", address=("0.0.0.0", 14550)),
+    channels: tuple[ChannelConfig, ...] = (  # config/gcsd.yaml says why (README "Connect a ground station")
+        ChannelConfig(name="lan", type="udp-client", address=("255.255.255.255", 14550), broadcast=True),
+        ChannelConfig(name="gcs", type="udp-server", address=("0.0.0.0", 14551)),
     )
     log: LogConfig = LogConfig()
     serial_control: tuple[SerialControlPort, ...] = ()

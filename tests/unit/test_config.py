@@ -39,16 +39,18 @@ def test_shipped_config_file_is_exactly_the_default():
     assert load_config(DEFAULT_YAML) == default_config()
 
 
-def test_default_config_is_a_copter_with_one_udp_server_channel_on_14550():
+def test_default_config_is_a_copter_broadcasting_to_14550_with_a_udp_server_on_14551():
     config = default_config()
     assert config == Config()
     assert (config.vehicle.type, config.vehicle.sysid, config.vehicle.compid) == ("copter", 1, 1)
     assert config.vehicle.home == Home(lat=-35.363262, lon=149.165237, alt=584.0)
     assert config.state_dir == Path("./gcsd-state")
-    [channel] = config.channels
-    assert (channel.name, channel.type, channel.address) == ("gcs", "udp-server", ("0.0.0.0", 14550))
-    assert dict(channel.streams) == DEFAULT_STREAM_RATES_HZ
-    assert channel.bandwidth is None
+    lan, gcs = config.channels
+    assert (lan.name, lan.type, lan.address, lan.broadcast) == ("lan", "udp-client", ("255.255.255.255", 14550), True)
+    assert (gcs.name, gcs.type, gcs.address, gcs.broadcast) == ("gcs", "udp-server", ("0.0.0.0", 14551), False)
+    for channel in config.channels:
+        assert dict(channel.streams) == DEFAULT_STREAM_RATES_HZ
+        assert channel.bandwidth is None
 
 
 @pytest.mark.parametrize("text", ["", "\n\n", "# only a comment\n  # and another\n", "---\n", "~\n"])
@@ -97,7 +99,7 @@ def test_streams_given_are_merged_over_the_defaults():
 
 
 def test_streams_are_read_only():
-    [channel] = default_config().channels
+    channel = default_config().channels[0]
     with pytest.raises(TypeError):
         channel.streams["position"] = 50  # type: ignore[index]
 
