@@ -41,9 +41,11 @@ def sys_status(node, channel, now):
     """Sensor bits as ArduPilot sets them, from the vehicle's real state (gcsd.vehicles.health)."""
     s = node.state
     present, enabled, healthy = sensor_bits(node)
+    volts_mv, current_ca, remaining = 0, -1, -1  # no battery monitor (BATT_MONITOR 0), as ArduPilot
+    if battery_monitored(node):
+        volts_mv, current_ca, remaining = int(s.battery_voltage_v * 1000), int(s.current_a * 100), s.battery_remaining_pct
     return M.MAVLink_sys_status_message(
-        present, enabled, healthy, 100, int(s.battery_voltage_v * 1000), int(s.current_a * 100),
-        s.battery_remaining_pct, 0, node.parse_error_count(), 0, 0, 0, 0,
+        present, enabled, healthy, 100, volts_mv, current_ca, remaining, 0, node.parse_error_count(), 0, 0, 0, 0,
     )
 
 
@@ -107,7 +109,14 @@ def system_time(node, channel, now):
     return M.MAVLink_system_time_message(int(node.clock.wall() * 1e6), node.time_boot_ms(now))
 
 
+def battery_monitored(node) -> bool:
+    """BATT_MONITOR 0: no battery monitor, so no BATTERY_STATUS and no battery in SYS_STATUS."""
+    return "BATT_MONITOR" not in node.params or node.params.get("BATT_MONITOR") != 0
+
+
 def battery_status(node, channel, now):
+    if not battery_monitored(node):
+        return None
     s = node.state
     cells = [int(s.battery_voltage_v * 1000 / 4)] * 4 + [65535] * 6
     return M.MAVLink_battery_status_message(
@@ -138,6 +147,10 @@ def _servo_pwm(node, n: int) -> int:
     override = node.state.servo_override.get(n)  # DO_SET_SERVO, DO_REPEAT_SERVO, DO_MOTOR_TEST
     if override is not None:
         return override
+    if node.vehicle.motor_pwm is not None:  # a multicopter: FRAME_CLASS, MOT_* (vehicles/motors.py)
+        motor = node.vehicle.motor_pwm(node, n)
+        if motor is not None:
+            return motor
     p = node.params.get
     lo, hi = p(f"SERVO{n}_MIN"), p(f"SERVO{n}_MAX")
     if p(f"SERVO{n}_FUNCTION") in MOTOR_FUNCTIONS:

@@ -125,6 +125,7 @@ def test_a_documented_range_is_enforced_and_the_default_can_be_written_back():
     assert (d.min, d.max, d.units) == (1000, 8000, "cdeg")  # ArduPilot 4.6's @Range and @Units
     assert store.set("ANGLE_MAX", 9000.0) is SetResult.OUT_OF_RANGE
     assert store.get("ANGLE_MAX") == 3000
+    assert store.set("MOT_SPIN_ARM", f32(0.2)) is SetResult.CHANGED  # the top of 0..0.2, as float32 sends it
     for entry in store.entries():  # QGroundControl's "reset to defaults" writes each default back
         if not store.definition(entry.name).read_only:
             assert store.set(entry.name, entry.default) in (SetResult.UNCHANGED, SetResult.CHANGED), entry

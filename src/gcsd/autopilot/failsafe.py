@@ -86,8 +86,8 @@ class Failsafes:
         return []
 
     def _battery(self, s, settings: Settings, params) -> list[Event]:
-        if "BATT_LOW_VOLT" not in params:
-            return []
+        if "BATT_LOW_VOLT" not in params or ("BATT_MONITOR" in params and params.get("BATT_MONITOR") == 0):
+            return []  # no battery monitor: nothing to fail
         get = params.get
         volts, left = s.battery_voltage_v, s.capacity_mah - s.consumed_mah
         critical = (0 < get("BATT_CRT_VOLT") and volts < get("BATT_CRT_VOLT")) or \

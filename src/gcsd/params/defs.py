@@ -24,7 +24,7 @@ from functools import cache
 from pathlib import Path
 
 from ..streams import PARAM_SUFFIX, STREAM_NAMES
-from .store import INT8, INT16, INT32, REAL32, ParamDef
+from .store import INT8, INT16, INT32, REAL32, ParamDef, as_float
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 TYPES = {"INT8": INT8, "INT16": INT16, "INT32": INT32, "REAL32": REAL32}
@@ -46,7 +46,10 @@ def parameter_set(name: str) -> tuple[ParamDef, ...]:
         pname, ptype, default, lo, hi, flags, units, display = line.split("\t")
         code = TYPES[ptype]
         value = float(default) if code == REAL32 else int(float(default))
-        defs.append(ParamDef(pname, code, value, _number(lo), _number(hi), units, display,
+        low, high = _number(lo), _number(hi)
+        if code == REAL32:  # a ground station sends float32: 0.2 arrives as 0.2000000030, in range
+            low, high = (None if x is None else as_float(x) for x in (low, high))
+        defs.append(ParamDef(pname, code, value, low, high, units, display,
                              read_only="O" in flags, reboot=pname in NEXT_START))
     return tuple(defs)
 

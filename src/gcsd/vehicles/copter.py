@@ -12,7 +12,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from ..autopilot.settings import DISARM, Settings
 from ..autopilot.settings import Behaviour as B
 from ..sim import Limits, MultirotorDynamics
-from . import commands, common, firmware, prearm
+from . import commands, common, firmware, motors, prearm
 from .base import VehicleType, modes_named, stream_rates
 from .modes import mode_mapping
 
@@ -62,6 +62,7 @@ COPTER = VehicleType(
     name="copter",
     firmware="ArduCopter",
     banner_lines=firmware.copter_frame,
+    motor_pwm=motors.copter_motor_pwm,
     mav_type=M.MAV_TYPE_QUADROTOR,
     modes=_modes,
     initial_mode=_by_name["STABILIZE"],

@@ -58,8 +58,8 @@ def gps(node) -> list[str]:
 
 
 def battery(node) -> list[str]:
-    if not _enabled(node, BIT_BATTERY):
-        return []
+    if not _enabled(node, BIT_BATTERY) or ("BATT_MONITOR" in node.params and node.params.get("BATT_MONITOR") == 0):
+        return []  # no battery monitor, no battery checks
     p, s = node.params.get, node.state
     out = []
     if p("BATT_ARM_VOLT") > 0 and s.battery_voltage_v < p("BATT_ARM_VOLT"):
