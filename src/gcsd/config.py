@@ -99,7 +99,7 @@ class MissionConfig:
     max_items: int = 700  # mission items, home (item 0) included
     max_fence: int = 100
     max_rally: int = 50
-    retry_ms: int = 1000  # re-request a missing item after this long (ArduPilot: 1000 ms)
+    retry_ms: int = 1000  # the longest wait before re-requesting an item (ArduPilot's fixed 1000 ms); see gcsd.rtt
 
 
 @dataclass(frozen=True)
