@@ -120,3 +120,42 @@ def test_level_calibration_reports_in_progress_then_accepted_and_sets_ahrs_trim(
     assert final is not None
     assert wait_for(gcs, lambda r: r.type == "STATUSTEXT" and "Trim OK" in r.msg.text, 3.0, since=mark)
     assert _param(gcs, "AHRS_TRIM_X") == pytest.approx(0.0)  # the vehicle sits level
+
+
+def test_motor_test_as_qgroundcontrols_motors_page_sends_it_spins_one_output_then_stops(gcs):
+    lo, hi = _param(gcs, "MOT_PWM_MIN"), _param(gcs, "MOT_PWM_MAX")  # ArduCopter's motor test range
+    assert _param(gcs, "SERVO1_FUNCTION") == 33  # Motor1
+    mark = gcs.mark()
+    # motor 1, MOTOR_TEST_THROTTLE_PERCENT, 20 %, 1 s, motor count 0, MOTOR_TEST_ORDER_BOARD
+    gcs.command_long(M.MAV_CMD_DO_MOTOR_TEST, 1, M.MOTOR_TEST_THROTTLE_PERCENT, 20, 1, 0, M.MOTOR_TEST_ORDER_BOARD)
+    ack = wait_for(gcs, is_ack(M.MAV_CMD_DO_MOTOR_TEST), 3.0, since=mark)
+    assert ack is not None and ack.msg.result == M.MAV_RESULT_ACCEPTED
+    spinning = lo + 0.2 * (hi - lo)
+    on = wait_for(gcs, lambda r: r.type == "SERVO_OUTPUT_RAW" and abs(r.msg.servo1_raw - spinning) <= 1, 3.0, since=mark)
+    assert on is not None, "output 1 never showed the test throttle"
+    assert on.msg.servo2_raw == lo  # only that motor
+    off = wait_for(gcs, lambda r: r.type == "SERVO_OUTPUT_RAW" and r.msg.servo1_raw == lo, 3.0, since=len(gcs.received))
+    assert off is not None, "the motor test did not end"
+    assert wait_for(gcs, lambda r: r.type == "STATUSTEXT" and r.msg.text == "starting motor test", 1.0, since=mark)
+    assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM, 1) == M.MAV_RESULT_ACCEPTED
+    assert _ack(gcs, M.MAV_CMD_DO_MOTOR_TEST, 1, 0, 20, 1) == M.MAV_RESULT_FAILED  # ArduCopter: disarmed only
+
+
+def test_radio_calibration_results_written_as_parameters_act_on_the_sticks(gcs):
+    """QGroundControl's radio calibration ends by writing RCn_MIN/MAX/TRIM; they must shape the sticks
+    (MANUAL_CONTROL full throttle reads as RC3_MAX) and the pre-arm RC check."""
+    for name, value in (("RC3_MIN", 1100), ("RC3_MAX", 1900), ("RC3_TRIM", 1100)):
+        mark = gcs.mark()
+        gcs.send(M.MAVLink_param_set_message(1, 1, name.encode(), value, M.MAV_PARAM_TYPE_INT16))
+        echo = wait_for(gcs, lambda r, n=name: r.type == "PARAM_VALUE" and r.msg.param_id == n, 3.0, since=mark)
+        assert echo is not None and echo.msg.param_value == value
+    mark = gcs.mark()
+    gcs.send(M.MAVLink_manual_control_message(1, 0, 0, 1000, 0, 0))  # full throttle
+    full = wait_for(gcs, lambda r: r.type == "RC_CHANNELS" and r.msg.chan3_raw == 1900, 3.0, since=mark)
+    assert full is not None, "full throttle did not read as RC3_MAX"
+    mark = gcs.mark()
+    gcs.send(M.MAVLink_param_set_message(1, 1, b"RC3_MAX", 1600, M.MAV_PARAM_TYPE_INT16))  # a bad calibration
+    assert wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and r.msg.param_id == "RC3_MAX", 3.0, since=mark)
+    mark = gcs.mark()
+    assert _ack(gcs, M.MAV_CMD_RUN_PREARM_CHECKS) == M.MAV_RESULT_ACCEPTED
+    assert wait_for(gcs, lambda r: r.type == "STATUSTEXT" and r.msg.text.startswith("PreArm: RC3_MAX"), 3.0, since=mark)

@@ -10,8 +10,8 @@ gets follows ArduPilot SITL's (../shared/ardupilot/*-probe.json; docs/commands.m
   armed, on the ground (else FAILED), as ArduCopter's do_user_takeoff.
 - takeoff_mode (plane): NAV_TAKEOFF switches to TAKEOFF mode; param7 > 0 sets its altitude.
 - land_start (plane): DO_LAND_START jumps the mission to its DO_LAND_START marker and flies on.
-- motor_test (copter): DO_MOTOR_TEST param1 motor, param3 throttle %, param4 seconds;
-  disarmed only (DENIED armed).
+- motor_test (copter): DO_MOTOR_TEST param1 motor, param2 throttle type, param3 throttle,
+  param4 seconds, with ArduCopter's checks (disarmed, landed, safety off, RC calibrated).
 - set_reverse (rover): DO_SET_REVERSE param1 1 drives backwards.
 - the rest (condition_yaw_any_mode, change_speed*, flight_termination, return_path_start,
   solo buttons, plane's autotune/go-around/guided changes...) say ArduPilot's rule each.
@@ -24,6 +24,7 @@ import math
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import Behaviour
+from . import prearm
 
 ACCEPTED, DENIED, FAILED = M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_DENIED, M.MAV_RESULT_FAILED
 UNSUPPORTED = M.MAV_RESULT_UNSUPPORTED
@@ -51,13 +52,55 @@ def land_start(node, req) -> int:
     return FAILED
 
 
+MOTOR_TEST_MAX_S = 30.0  # ArduCopter's MOTOR_TEST_TIMEOUT_MS_MAX
+THROTTLE_PERCENT, THROTTLE_PWM = M.MOTOR_TEST_THROTTLE_PERCENT, M.MOTOR_TEST_THROTTLE_PWM
+
+
+def _motor_pwm_range(node) -> tuple[float, float]:
+    """ArduCopter's get_pwm_output_min/max: MOT_PWM_MIN/MAX, or RC3_MIN/MAX where those are 0."""
+    p = node.params
+    lo = p.get("MOT_PWM_MIN") if "MOT_PWM_MIN" in p else 0
+    hi = p.get("MOT_PWM_MAX") if "MOT_PWM_MAX" in p else 0
+    if not lo or not hi:
+        lo, hi = p.get("RC3_MIN"), p.get("RC3_MAX")
+    return float(lo), float(hi)
+
+
 def motor_test(node, req) -> int:
+    """ArduCopter's mavlink_motor_test_start: param1 motor (the output whose SERVOn_FUNCTION is that
+    motor), param2 throttle type (0 percent of MOT_PWM_MIN..MAX, 1 PWM), param3 throttle, param4
+    seconds (at most 30). Refused (FAILED, with
+    ArduPilot's STATUSTEXT) when armed, not landed, with the safety switch on or, for a percentage,
+    with RC not calibrated; a motor beyond the frame's outputs or a throttle out of range: FAILED."""
     if node.state.armed:
-        return DENIED
-    motor = int(req.param1)
-    if not 1 <= motor <= 8 or not 0 <= req.param3 <= 100:
+        node.send_text(M.MAV_SEVERITY_CRITICAL, "Must be disarmed for motor test")
         return FAILED
-    node.sim.motor_test(motor, req.param3, max(0.0, min(req.param4, 600.0)))
+    reasons = [("Motor Test: vehicle not landed", not node.state.on_ground),
+               ("Motor Test: Safety switch", "Hardware safety switch" in prearm.safety_switch(node)),
+               ("Motor Test: RC not calibrated", req.param2 != THROTTLE_PWM and bool(prearm.rc_calibration(node)))]
+    for text, failing in reasons:
+        if failing:
+            node.send_text(M.MAV_SEVERITY_CRITICAL, text)
+            return FAILED
+    motor = int(req.param1) if math.isfinite(req.param1) else 0
+    get = node.params.get
+    outputs = {int(get(f"SERVO{n}_FUNCTION")) - 32: n for n in range(1, 17) if f"SERVO{n}_FUNCTION" in node.params
+               and 33 <= get(f"SERVO{n}_FUNCTION") <= 40}  # motor number -> output
+    if motor not in outputs:
+        return FAILED
+    output = outputs[motor]
+    lo, hi = _motor_pwm_range(node)
+    if req.param2 == THROTTLE_PWM and lo <= req.param3 <= hi:
+        pwm = req.param3
+    elif req.param2 == THROTTLE_PERCENT and 0 <= req.param3 <= 100:
+        pwm = lo + (hi - lo) * req.param3 / 100.0
+    else:
+        return FAILED
+    servo_lo, servo_hi = get(f"SERVO{output}_MIN"), get(f"SERVO{output}_MAX")
+    percent_of_servo = 100.0 * (pwm - servo_lo) / max(servo_hi - servo_lo, 1)  # what outputs.motor_test takes
+    seconds = max(0.0, min(req.param4, MOTOR_TEST_MAX_S)) if math.isfinite(req.param4) else 0.0
+    node.send_text(M.MAV_SEVERITY_INFO, "starting motor test")
+    node.sim.motor_test(output, percent_of_servo, seconds)
     return ACCEPTED
 
 
