@@ -14,6 +14,7 @@ topics and the bytes on them are checked directly.
    vehicle's signed frames reach the ground station byte-exact (the same bytes as on the broker).
 5. mqtts:// with a CA file and username + password_file against a TLS, password-only broker; a
    wrong password is refused (the channel's open fails, so run_channel retries).
+6. Two ground sides split one fleet by `sysids`; 7. `no_forward` on an mqtt channel is honoured.
 """
 
 from __future__ import annotations
@@ -354,3 +355,32 @@ def test_mqtts_with_a_password_file_and_a_wrong_password_is_refused(tls_broker, 
 
     with pytest.raises(OSError, match="refused"):
         asyncio.run(attempt())  # run_channel logs it and retries with its capped backoff
+
+
+def test_two_ground_sides_split_a_fleet_by_sysids(broker, daemon, client, tmp_path):
+    topic = "gcsd/split"
+    daemon(vehicle_side(tmp_path, "v", broker, topic, count=6, sysid=1))
+    stations = []
+    for name, sysids in (("low", "1-3"), ("high", [4, 5, 6])):
+        conf = ground_side(tmp_path, broker, topic, sysids=sysids)
+        conf["state_dir"] = str(tmp_path / name)
+        stations.append(client(udp_url(daemon(conf).port("gcs"))))
+    low, high = stations
+    heard_all(low, {(1, 1), (2, 1), (3, 1)})
+    heard_all(high, {(4, 1), (5, 1), (6, 1)})
+    pump([low, high], 1.2)  # one more heartbeat period of every vehicle, in the same window for both
+    seen_low = {r.src[0] for r in low.since(0, "HEARTBEAT")} - {GROUND_SYSID}
+    seen_high = {r.src[0] for r in high.since(0, "HEARTBEAT")} - {GROUND_SYSID}
+    assert (seen_low, seen_high) == ({1, 2, 3}, {4, 5, 6})
+    assert param_value(high, (5, 1), b"SYSID_THISMAV") == 5.0
+
+
+def test_no_forward_on_the_mqtt_channel_is_honoured_like_on_any_channel(broker, daemon, client, tmp_path):
+    topic = "gcsd/closed"
+    daemon(vehicle_side(tmp_path, "v", broker, topic, count=2, sysid=1))
+    ground = daemon(ground_side(tmp_path, broker, topic, options=["no_forward"]))
+    gcs = client(udp_url(ground.port("gcs")))
+    seen = heartbeats(gcs, 2.5)
+    assert (GROUND_SYSID, 191) in seen, "the ground side itself is heard"
+    assert ground.stats("fleet")["packets_in"] > 0, "the fleet's frames reach the ground side"
+    assert not {1, 2} & {s for s, _ in seen}, "but a no_forward channel's frames are not forwarded"
