@@ -46,7 +46,14 @@ def _texts(gcs, since: int) -> list[str]:
     return [r.msg.text for r in gcs.since(since, "STATUSTEXT")]
 
 
-def test_compass_calibration_as_qgroundcontrol_runs_it_saves_offsets_and_the_daemon_lives(gcs):
+def test_compass_calibration_as_qgroundcontrol_runs_it_saves_offsets_and_the_daemon_lives(daemon, client):
+    d = daemon({"channels": [{"name": "gcs", "type": "udp-server", "address": "127.0.0.1:0"},
+                             {"name": "gcs2", "type": "udp-server", "address": "127.0.0.1:0"}]})
+    gcs = client(f"udpout:127.0.0.1:{d.port('gcs')}")
+    other = client(f"udpout:127.0.0.1:{d.port('gcs2')}", sysid=254)  # a second ground station watching
+    for c in (gcs, other):
+        c.heartbeat()
+        assert wait_for(c, lambda r: r.type == "HEARTBEAT" and r.src == (1, 1), 3.0)
     before = _param(gcs, "COMPASS_OFS_X")
     assert before is not None
     assert _ack(gcs, M.MAV_CMD_DO_CANCEL_MAG_CAL) == M.MAV_RESULT_ACCEPTED  # "onboard cal supported"
@@ -66,6 +73,9 @@ def test_compass_calibration_as_qgroundcontrol_runs_it_saves_offsets_and_the_dae
     saved = [_param(gcs, f"COMPASS_OFS_{a}") for a in "XYZ"]
     assert saved == pytest.approx([rep.ofs_x, rep.ofs_y, rep.ofs_z])
     assert (rep.diag_x, rep.diag_y, rep.diag_z) != (0.0, 0.0, 0.0)
+    # the other ground station saw it too (ArduPilot sends them to every GCS link)
+    seen = wait_for(other, lambda r: r.type == "MAG_CAL_REPORT" and r.msg.compass_id == rep.compass_id, 3.0)
+    assert seen is not None and other.since(0, "MAG_CAL_PROGRESS")
     # the daemon is alive and still answers commands after the whole dialogue
     assert _ack(gcs, M.MAV_CMD_DO_ACCEPT_MAG_CAL) == M.MAV_RESULT_ACCEPTED
 

@@ -27,7 +27,7 @@
 - RUN_PREARM_CHECKS: each failure as "PreArm: ..." STATUSTEXT; ACCEPTED (TEMPORARILY_REJECTED
   armed).
 - DO_START_MAG_CAL, DO_ACCEPT_MAG_CAL, DO_CANCEL_MAG_CAL: a simulated onboard compass
-  calibration (`magcal`): MAG_CAL_PROGRESS and MAG_CAL_REPORT on the requester's channel,
+  calibration (`magcal`): MAG_CAL_PROGRESS and MAG_CAL_REPORT to every ground station,
   results into COMPASS_OFS*/DIA*/ODI* when accepted, or at once with autosave (param3 1).
   FIXED_MAG_CAL_YAW saves the offsets at once (disarmed).
 """
@@ -53,6 +53,7 @@ ACCEPTED, DENIED, FAILED, UNSUPPORTED, LATER = (
     M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_DENIED, M.MAV_RESULT_FAILED, M.MAV_RESULT_UNSUPPORTED,
     M.MAV_RESULT_TEMPORARILY_REJECTED)
 CALIBRATION_S = 2.0
+MAG_OUTBOX = 32
 FORMAT_S = 1.0
 
 
@@ -66,7 +67,7 @@ class MaintenanceService(Service):
         self.accel = AccelCal(node.params)
         self.accel_requester: tuple | None = None  # ((sysid, compid), channel) of the accel dialogue
         self.mag = MagCal(node.params)
-        self.mag_channel = None
+        self.mag_outbox: dict[int, list] = {}  # channel index -> MAG_CAL messages for it
 
     def commands(self):
         return {
@@ -271,7 +272,6 @@ class MaintenanceService(Service):
         delay = req.param4 if math.isfinite(req.param4) else 0.0
         result = self.mag.start(req.param1 if math.isfinite(req.param1) else -1, req.param3 != 0, delay, req.inc.now)
         if result == ACCEPTED:
-            self.mag_channel = req.inc.channel
             self.node.wake(req.inc.channel)
         return result
 
@@ -299,18 +299,33 @@ class MaintenanceService(Service):
         self.node.send_text(M.MAV_SEVERITY_INFO, f"Mag cal from yaw {req.param1:.0f}: offsets saved")
         return ACCEPTED
 
+    def _mag_cal_messages(self, channel, now: float) -> list:
+        """MAG_CAL_PROGRESS / MAG_CAL_REPORT go to every ground station, as ArduPilot's
+        gcs().send_message: whichever channel's pass finds them due sends them and leaves a copy
+        for the other active channels (at most MAG_OUTBOX each)."""
+        due = self.mag.messages(now) if self.mag.runs else []
+        if due:
+            for link in self.node.links:
+                other = link.channel
+                if other is channel or other.policy.private or not other.peers:
+                    continue
+                box = self.mag_outbox.setdefault(other.index, [])
+                box.extend(due)
+                del box[:-MAG_OUTBOX]
+                self.node.wake(other)
+            if self.mag.saved_any:
+                self.mag.saved_any = False
+                self._save_params()
+        return due + self.mag_outbox.pop(channel.index, [])
+
     # --- the send pass -----------------------------------------------------------------------
     def pending(self, channel, now: float, send) -> float | None:
         for ack in self.slot.due(channel, now):
             send(ack)
         if self.accel_requester is not None and self.accel_requester[1] is channel:
             self._send_asks(self.accel.poll(now))
-        if self.mag_channel is channel:
-            for msg in self.mag.messages(now):
-                send(msg)
-            if self.mag.saved_any:
-                self.mag.saved_any = False
-                self._save_params()
+        for msg in self._mag_cal_messages(channel, now):
+            send(msg)
         deadlines = [d for d in (self.slot.next_deadline(), self.accel.next_deadline(), self.mag.next_deadline())
                      if d is not None]
         return min(deadlines) if deadlines else None
