@@ -6,10 +6,10 @@ waypoint radius gcsd gives it. gcsd supplies everything MAVLink: heartbeats and 
 robot's state, parameters, missions, modes (GUIDED, AUTO, RTL, HOLD...), commands and pre-arm
 checks; the robot adds one check of its own (its motor controller must be connected).
 
-    python sitl/embed_robot.py                  # UDP server on 0.0.0.0:14550, state in ./robot-state
+    python sitl/embed_robot.py                  # UDP server on 0.0.0.0:14551, state in ./robot-state
     python sitl/embed_robot.py --port 14560 --state-dir /tmp/robot
 
-Then, e.g. with MAVProxy (`mavproxy.py --master=udpout:127.0.0.1:14550`): `mode GUIDED`,
+Then, e.g. with MAVProxy (`mavproxy.py --master=udpout:127.0.0.1:14551`): `mode GUIDED`,
 `arm throttle`, `guided -35.3631 149.1653 0`; or upload a mission and `mode AUTO`.
 """
 
@@ -74,7 +74,7 @@ def config(port: int, state_dir: str, host: str = "0.0.0.0"):
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--port", type=int, default=14550)
+    p.add_argument("--port", type=int, default=14551)
     p.add_argument("--state-dir", default="./robot-state")
     a = p.parse_args(argv)
     return run(config(a.port, a.state_dir), DiffDriveRobot())
