@@ -87,6 +87,10 @@ def assert_still_serving(d: FuzzedDaemon, what: str) -> None:
     # ground station would, and the heartbeat must come
     assert d.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_HEARTBEAT, 0) == M.MAV_RESULT_ACCEPTED
     assert d.heartbeat_arrives(), f"{what}: no HEARTBEAT any more"
+    if os.environ.get("GCSD_FUZZ_DUMP"):  # hunting by hand: every error the daemon logged
+        for r in d.log_records():
+            if r.get("level") in ("error", "critical") or "exception" in r:
+                print(f"{what} LOGGED {r}"[:2000])
     failed = [r for r in d.log_records() if r.get("event") == "command_failed"]
     assert failed == [], f"{what}: {len(failed)} command handlers raised, first: {failed[0]}"
 

@@ -258,3 +258,26 @@ def test_a_stored_plan_holding_nan_is_rejected_at_start_and_the_daemon_runs(daem
     # nothing to fly: MISSION_START is refused, and the daemon carries on
     assert ack(c, lambda: c.command_long(M.MAV_CMD_MISSION_START), M.MAV_CMD_MISSION_START) == M.MAV_RESULT_FAILED
     assert answers(c)
+
+
+@pytest.mark.parametrize(("param1", "result"), [
+    (1, M.MAV_RESULT_ACCEPTED),  # reboot: the simulated vehicle restarts, the daemon does not exit
+    (3, M.MAV_RESULT_ACCEPTED),
+    (2, M.MAV_RESULT_UNSUPPORTED),  # shutdown: not something a peer may do to the daemon
+    (NAN, M.MAV_RESULT_UNSUPPORTED),
+])
+def test_reboot_and_shutdown_commands_never_stop_the_daemon(daemon, client, param1, result):
+    c = connect(daemon, client)
+    assert ack(c, lambda: c.command_long(M.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, param1),
+               M.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN) == result
+    assert answers(c)
+
+
+def test_a_location_command_in_a_local_frame_is_denied(daemon, client):
+    c = connect(daemon, client)
+    before = home(c)
+    result = ack(c, lambda: c.command_int(M.MAV_CMD_DO_SET_HOME, 0, x=int(HOME_LAT * 1e7) + 100, y=int(HOME_LON * 1e7),
+                                          z=10.0, frame=M.MAV_FRAME_LOCAL_NED), M.MAV_CMD_DO_SET_HOME)
+    assert result == M.MAV_RESULT_DENIED
+    assert home(c) == pytest.approx(before, abs=1e-6)
+    assert answers(c)

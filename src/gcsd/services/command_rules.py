@@ -17,8 +17,8 @@ it cannot honour and no such value reaches the vehicle's state or a stored file:
   +-83 000 m (LOCATION_ALT_MAX_M); beyond -> DENIED.
 - `location`: params 5-7 are a position. Latitude within +-90 degrees and longitude +-180
   (else `bad_latlng`: DENIED as ArduPilot's check_latlng, FAILED for DO_SET_HOME whose set_home
-  refuses it), altitude finite and within +-83 000 m (else DENIED, ArduPilot's
-  location_from_command_t). x = y = 0 means "here" / "none" for these commands and passes.
+  refuses it), altitude finite and within +-83 000 m and a global frame (GLOBAL, RELATIVE_ALT,
+  TERRAIN_ALT or their _INT forms; else DENIED, ArduPilot's location_from_command_t). x = y = 0 means "here" / "none" for these commands and passes.
   `location_unused(values)`: when the position is not used (DO_SET_HOME param1 1 or x = y = 0,
   where ArduPilot takes the current position before looking at the location), it is not checked.
 - A command that has no entry here uses all seven: any NaN or infinity -> DENIED. A handler that
@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from ..mission.items import LOCATION_ALT_MAX_M, lat_ok, lon_ok
+from ..mission.items import GLOBAL_FRAMES, LOCATION_ALT_MAX_M, lat_ok, lon_ok
 
 ALL = frozenset(range(1, 8))
 LOCATION = frozenset({5, 6, 7})
@@ -128,8 +128,8 @@ def _latlng_ok(x: float, y: float) -> bool:
     return math.isfinite(x) and math.isfinite(y) and lat_ok(x) and lon_ok(y)
 
 
-def check(rule: Rule, values: Values) -> int | Values:
-    """The MAV_RESULT that refuses `values`, or the values a handler gets (unused ones zeroed)."""
+def check(rule: Rule, values: Values, frame: int) -> int | Values:
+    """The MAV_RESULT that refuses `values` (in `frame`), or the values a handler gets (unused ones zeroed)."""
     out: list[float] = []
     for n, v in enumerate(values, start=1):
         if n not in rule.uses or (rule.location and n in LOCATION):
@@ -142,7 +142,7 @@ def check(rule: Rule, values: Values) -> int | Values:
             out.append(v)
     if rule.location and not (rule.location_unused is not None and rule.location_unused(values)):
         x, y, z = values[4], values[5], values[6]
-        if not (math.isfinite(z) and abs(z) <= LOCATION_ALT_MAX_M):
+        if not (math.isfinite(z) and abs(z) <= LOCATION_ALT_MAX_M) or frame not in GLOBAL_FRAMES:
             return DENIED
         if not _latlng_ok(x, y):
             return rule.bad_latlng

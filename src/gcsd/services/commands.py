@@ -104,7 +104,7 @@ class CommandService(Service):
             self.unsupported += 1
             self._ack(req.inc, req.command, M.MAV_RESULT_UNSUPPORTED)
             return
-        checked = check(RULES.get(req.command, STRICT), (*req.params, req.x, req.y, req.z))
+        checked = check(RULES.get(req.command, STRICT), (*req.params, req.x, req.y, req.z), req.frame)
         if isinstance(checked, int):
             self.refused += 1
             self._ack(req.inc, req.command, checked)
