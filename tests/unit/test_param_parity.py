@@ -148,3 +148,60 @@ def test_the_configuration_decides_sysids_and_stream_rates_and_extra_channels_ge
     names = [d.name for d in defs]
     assert names.index("SR3_RAW_SENS") == names.index("SR2_ADSB") + 1  # after ArduPilot's last SR group
     assert store.definition("SR4_EXTRA1").ptype == INT16 and store.definition("SR4_EXTRA1").max == 50
+
+
+# --- docs/parameters.md: the acting parameters, and the counts it states ------------------------
+
+DOC = Path(__file__).resolve().parents[2] / "docs" / "parameters.md"
+
+
+def expand(pattern: str) -> list[str]:
+    """Braces as in a shell: RC{1..3}_MIN, COMPASS_OFS{,2}_{X,Y}."""
+    m = re.search(r"\{([^{}]*)\}", pattern)
+    if m is None:
+        return [pattern]
+    body = m.group(1)
+    if ".." in body:
+        lo, hi = body.split("..")
+        options = [str(i) for i in range(int(lo), int(hi) + 1)]
+    else:
+        options = body.split(",")
+    return [name for option in options
+            for name in expand(pattern[:m.start()] + option + pattern[m.end():])]
+
+
+def acting_names(vehicle: str | None = None) -> set[str]:
+    """The names the docs' table says act (for `vehicle`: the rows naming it or "all")."""
+    section = DOC.read_text().split("## Parameters that act", 1)[1].split("<!-- acting-counts -->", 1)[0]
+    names: set[str] = set()
+    for line in section.splitlines():
+        if not line.startswith("| `"):
+            continue
+        cells = line.split("|")
+        types = {t.strip() for t in cells[2].split(",")}
+        if vehicle is None or vehicle in types or "all" in types:
+            for token in re.findall(r"`([A-Z0-9_{},.]+)`", cells[1]):
+                names.update(expand(token))
+    return names
+
+
+def stated_counts() -> dict[str, tuple[int, int]]:
+    block = DOC.read_text().split("<!-- acting-counts -->", 1)[1].split("<!-- /acting-counts -->", 1)[0]
+    rows = [r.split("|")[1:4] for r in block.splitlines() if r.split("|")[2:3] and r.split("|")[2].strip().isdigit()]
+    return {t.strip(): (int(s), int(a)) for t, s, a in rows}
+
+
+def test_every_acting_parameter_the_docs_name_is_ardupilots():
+    every = set().union(*({d.name for d in parameter_set(v.parameter_set())} for v in VEHICLE_TYPES.values()))
+    assert sorted(acting_names() - every) == []
+    for name, v in VEHICLE_TYPES.items():  # what a vehicle's settings read is in the docs' rows for it
+        assert sorted(set(v.params) - acting_names(name)) == [], name
+
+
+def test_the_docs_state_the_served_and_acting_counts_of_each_type():
+    counts = {}
+    for name, v in VEHICLE_TYPES.items():
+        acting = acting_names(name)
+        store = ParamStore(vehicle_params(v, 1, 255, False, [dict(DEFAULT_STREAM_RATES_HZ)], 1.0))
+        counts[name] = (len(store), sum(1 for e in store.entries() if e.name in acting))
+    assert stated_counts() == counts
