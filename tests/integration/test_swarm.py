@@ -30,7 +30,7 @@ def test_one_udp_server_shows_twenty_systems_and_each_answers_only_for_itself(da
     assert len(set(positions.values())) == COUNT  # each starts on its own spot
 
     mark = gcs.mark()
-    gcs.send(M.MAVLink_param_set_message(7, 1, b"WPNAV_SPEED", 777.0, M.MAV_PARAM_TYPE_INT16))
+    gcs.send(M.MAVLink_param_set_message(7, 1, b"WPNAV_SPEED", 777.0, M.MAV_PARAM_TYPE_REAL32))
     echo = wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and _name(r.msg.param_id) == "WPNAV_SPEED", 3.0, mark)
     assert echo is not None and echo.src == (7, 1) and echo.msg.param_value == 777.0
     pump([gcs], 0.5)
@@ -39,7 +39,7 @@ def test_one_udp_server_shows_twenty_systems_and_each_answers_only_for_itself(da
         mark = gcs.mark()
         gcs.send(M.MAVLink_param_request_read_message(sysid, 1, b"WPNAV_SPEED", -1))
         value = wait_for(gcs, lambda r, s=sysid: r.type == "PARAM_VALUE" and r.src == (s, 1), 3.0, mark)
-        assert value is not None and value.msg.param_value == (777.0 if sysid == 7 else 500.0)
+        assert value is not None and value.msg.param_value == (777.0 if sysid == 7 else 1000.0)  # ArduCopter SITL default
 
     mark = gcs.mark()
     gcs.command_long(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, target=(3, 1))
