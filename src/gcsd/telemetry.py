@@ -16,7 +16,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from .codec import MAVLink_message
 from .vehicles.firmware import FLIGHT_CUSTOM_VERSION, FLIGHT_SW_VERSION
-from .vehicles.health import sensor_bits
+from .vehicles.health import sensor_bits, system_status
 
 if TYPE_CHECKING:
     from .channel import Channel
@@ -33,7 +33,7 @@ def heartbeat(node, channel, now):
     s = node.state
     v = node.vehicle
     return M.MAVLink_heartbeat_message(
-        v.mav_type, M.MAV_AUTOPILOT_ARDUPILOTMEGA, v.base_mode(s), s.mode, v.system_status(s), 3
+        v.mav_type, M.MAV_AUTOPILOT_ARDUPILOTMEGA, v.base_mode(s), s.mode, system_status(node), 3
     )
 
 

@@ -124,3 +124,29 @@ def test_no_gps_means_no_gps_bits_no_ahrs_and_no_prearm(tmp_path):
     bits = _bits(h)
     assert "SENSOR_GPS" not in bits["health"] and "AHRS" not in bits["health"]
     assert "PREARM_CHECK" not in bits["health"]
+
+
+@pytest.mark.parametrize("vehicle", ["copter", "plane", "rover"])
+def test_heartbeat_is_ardupilots_disarmed_on_the_ground(tmp_path, vehicle):
+    probe = json.loads((PROBES / f"{vehicle}-probe.json").read_text())["heartbeat"]
+    h = Harness(tmp_path, vehicle=vehicle)
+    mark = h.mark()
+    h.run(1.5)
+    hb = h.of_type("HEARTBEAT", mark)[-1]
+    got = {k: getattr(hb, k) for k in ("type", "autopilot", "base_mode", "custom_mode", "system_status")}
+    assert got == {k: probe[k] for k in got}
+
+
+def test_an_armed_copter_on_the_ground_is_standby_and_active_once_flying(tmp_path):
+    """ArduCopter: STANDBY while landed, armed or not (QGroundControl's "flying" needs ACTIVE)."""
+    h = Harness(tmp_path)
+    h.mode("GUIDED")
+    assert h.arm() == ACCEPTED
+    mark = h.mark()
+    h.run(1.5)
+    assert h.of_type("HEARTBEAT", mark)[-1].system_status == M.MAV_STATE_STANDBY
+    assert h.command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 5) == ACCEPTED
+    assert h.run(20, until=lambda: h.state.relative_alt_m > 2)
+    mark = h.mark()
+    h.run(1.5)
+    assert h.of_type("HEARTBEAT", mark)[-1].system_status == M.MAV_STATE_ACTIVE

@@ -20,6 +20,8 @@ LASER_POSITION on a rover) and `sensor_bits(node)` adds what depends on state:
 | LOGGING | always | never (ArduPilot sets it only while logging armed) | always |
 | rate / attitude / yaw / XY / Z control | profile | by flight mode, ArduPilot's per-vehicle mode lists | = enabled |
 
+`system_status(node)` gives HEARTBEAT.system_status by the same per-vehicle rules.
+
 Differences from the probe files, on purpose: ArduPlane SITL reported TERRAIN unhealthy and Rover
 SITL AHRS unhealthy 19 s after boot, while their EKF and terrain loader were still settling;
 gcsd's simulation is settled from the first second, so both are healthy.
@@ -51,6 +53,7 @@ class SensorProfile:
     modes: dict[str, int] | None = None  # mode name -> control bits enabled in it
     terrain: bool = False
     airspeed: bool = False
+    standby: str = "disarmed"  # HEARTBEAT STANDBY when: "landed" (copter), "on_ground" (plane), "HOLD" (rover)
 
 
 def _modes(**groups: tuple[str, ...]) -> dict[str, int]:
@@ -72,6 +75,7 @@ COPTER = SensorProfile(
              "THROW", "SMART_RTL", "FOLLOW"),
     ),
     terrain=True,
+    standby="landed",
 )
 PLANE = SensorProfile(
     always=IMU | OUTPUTS,
@@ -85,6 +89,7 @@ PLANE = SensorProfile(
     ),
     terrain=True,
     airspeed=True,
+    standby="landed",
 )
 ROVER = SensorProfile(
     always=IMU | OUTPUTS,
@@ -94,6 +99,7 @@ ROVER = SensorProfile(
         rate_att=("ACRO", "STEERING", "HOLD", "SIMPLE"),
         nav=("AUTO", "GUIDED", "RTL", "SMART_RTL", "LOITER", "FOLLOW", "CIRCLE", "DOCK"),
     ),
+    standby="HOLD",
 )
 SUB = SensorProfile(  # ArduSub: like a copter without terrain or propulsion bits
     always=IMU | OUTPUTS,
@@ -175,3 +181,19 @@ def sensor_bits(node) -> tuple[int, int, int]:
     enabled |= loops
     healthy |= loops
     return present, enabled, healthy
+
+
+def system_status(node) -> int:
+    """HEARTBEAT.system_status as each ArduPilot vehicle sets it: CRITICAL while a failsafe is in
+    force; ArduCopter STANDBY while landed (armed or not: QGroundControl then offers takeoff, not
+    land), ArduPlane STANDBY unless flying, Rover ACTIVE unless in HOLD (Rover's
+    vehicle_system_status); the other types STANDBY disarmed, ACTIVE armed."""
+    s = node.state
+    if s.failsafe is not None and (s.armed or not s.on_ground):
+        return M.MAV_STATE_CRITICAL
+    standby = PROFILES.get(node.vehicle.name, COMPANION).standby
+    if standby == "landed":
+        return M.MAV_STATE_STANDBY if s.on_ground else M.MAV_STATE_ACTIVE
+    if standby == "HOLD":
+        return M.MAV_STATE_STANDBY if node.vehicle.mode_name(s.mode) == "HOLD" else M.MAV_STATE_ACTIVE
+    return M.MAV_STATE_ACTIVE if s.armed else M.MAV_STATE_STANDBY

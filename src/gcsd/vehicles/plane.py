@@ -70,7 +70,7 @@ PLANE = VehicleType(
     initial_mode=_by_name["MANUAL"],
     capabilities=M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT | M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT,
     guided_modes=frozenset({_by_name[n] for n in ("GUIDED", "AUTO", "RTL", "LOITER", "TAKEOFF")}),
-    manual_modes=frozenset({_by_name["MANUAL"]}),
+    manual_modes=frozenset(),  # ArduPlane's HEARTBEAT has STABILIZE_ENABLED even in MANUAL (base_mode 81 on SITL)
     behaviours=modes_named(
         _modes, MANUAL=B.MANUAL, STABILIZE=B.MANUAL, TRAINING=B.MANUAL, ACRO=B.MANUAL, FBWA=B.MANUAL,
         FBWB=B.MANUAL, CRUISE=B.MANUAL, AUTOTUNE=B.MANUAL, AUTO=B.AUTO, RTL=B.RTL, LOITER=B.HOLD,
