@@ -132,6 +132,7 @@ class MaintenanceService(Service):
         for n in (1, 2, 3):
             self._set(f"BARO{n}_GND_PRESS", pressure_pa)
         self.node.send_text(M.MAV_SEVERITY_INFO, "Updating barometer calibration")
+        self.node.send_text(M.MAV_SEVERITY_INFO, "Barometer calibration complete")
 
     def _level(self) -> None:
         roll, pitch = self.node.state.roll_rad, self.node.state.pitch_rad
