@@ -188,7 +188,9 @@ async def _open(channel: Channel):
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, UDP_RCVBUF)
         if server:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            # no SO_REUSEADDR: on Linux it lets a second UDP socket bind the same port and take
+            # its datagrams (another gcsd, or QGroundControl's own 14550), and a taken port must
+            # be a startup failure instead (UDP has no TIME_WAIT to work around)
             sock.bind((host, port))
         else:
             sock.bind(("127.0.0.1" if host.startswith("127.") else "0.0.0.0", 0))

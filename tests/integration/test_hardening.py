@@ -300,6 +300,7 @@ def _until(condition, timeout_s: float = 5.0) -> bool:
 @pytest.mark.parametrize("kind", [socket.SOCK_DGRAM, socket.SOCK_STREAM])
 def test_a_server_port_already_taken_is_exit_1_with_one_line(tmp_path, kind):
     holder = socket.socket(socket.AF_INET, kind)
+    holder.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as QGroundControl binds 14550
     holder.bind(("127.0.0.1", 0))
     if kind == socket.SOCK_STREAM:
         holder.listen()
