@@ -8,7 +8,7 @@ generated configuration on a free port); per topic (one MAVLink network: 8-bit s
 N/P copters each, consecutive sysids, one `mqtt` channel role vehicle, plus a `udp-server` channel
 "direct" with every stream off, the direct path for the latency comparison) and one ground-side
 process (a companion on sysid 251: a `udp-server` channel and an `mqtt` channel role ground, sysids
-all). Log level warning. Two stream profiles:
+all, its own streams off on the mqtt channel, as in sitl/fleet/ground.yaml). Log level warning. Two stream profiles:
 - fleet: the mqtt channel's streams all 0 and, once every vehicle is heard, the ground station
   broadcasts MAV_CMD_SET_MESSAGE_INTERVAL (target 0/0, so every vehicle takes it, through
   TOPIC/down/all) for SYS_STATUS and GLOBAL_POSITION_INT at 1 Hz: HEARTBEAT, SYS_STATUS and
@@ -176,7 +176,8 @@ def _vehicle_config(run_dir: Path, broker: str, topic: str, sysid: int, count: i
 def _ground_config(run_dir: Path, broker: str, topic: str) -> tuple[Path, int]:
     port = free_udp_port()
     cfg = gcsd_config(run_dir, [f'{{name: gcs, type: udp-server, address: "127.0.0.1:{port}"}}',
-                                f'{{name: fleet, type: mqtt, broker: "{broker}", topic: {topic}, role: ground}}'],
+                                f'{{name: fleet, type: mqtt, broker: "{broker}", topic: {topic}, role: ground, '
+                                f"streams: {ALL_OFF}}}"],
                       extra=f"vehicle: {{type: companion, sysid: {GROUND_SYSID}}}")
     return cfg, port
 
