@@ -290,7 +290,8 @@ class GCS:
         for ch in self.channels:
             snap = ch.snapshot()
             rate_in, rate_out = self._rates.get(ch.name, (0.0, 0.0))
-            address = f"{ch.local_address[0]}:{ch.local_address[1]}" if ch.local_address else (ch.config.device or "")
+            address = f"{ch.local_address[0]}:{ch.local_address[1]}" if ch.local_address else (
+                ch.config.device or (ch.config.mqtt.broker if ch.config.mqtt else ""))
             channels.append({
                 "name": ch.name, "type": ch.config.type, "address": address, "rate_in": rate_in,
                 "rate_out": rate_out, "signature_reject_reasons": dict(ch.signature_reject_reasons), **snap,

@@ -242,7 +242,7 @@ async def _open(channel: Channel):
 def _describe(channel: Channel) -> str:
     if channel.local_address:
         return f"{channel.local_address[0]}:{channel.local_address[1]}"
-    return channel.config.device or ""
+    return channel.config.device or (channel.config.mqtt.broker if channel.config.mqtt else "")
 
 
 SERVER_TYPES = ("udp-server", "tcp-server")
