@@ -49,10 +49,10 @@ from pathlib import Path
 if __package__ in (None, ""):  # run as a script: python bench/fleet.py
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as M
+from tests.integration.mosquitto import Mosquitto
 
-from bench.routers import Launched, cpu_seconds, free_udp_port, gcsd_config, start_gcsd  # noqa: E402
-from tests.integration.mosquitto import Mosquitto  # noqa: E402
+from bench.routers import Launched, cpu_seconds, free_udp_port, gcsd_config, start_gcsd
 
 GROUND_SYSID = 251
 SETTLE_S = 4.0
@@ -167,8 +167,8 @@ def _vehicle_config(run_dir: Path, broker: str, topic: str, sysid: int, count: i
     direct = free_udp_port()
     mqtt = f'{{name: fleet, type: mqtt, broker: "{broker}", topic: {topic}, role: vehicle'
     mqtt += f", streams: {streams}}}" if streams else "}"
-    cfg = gcsd_config(run_dir, [mqtt, f'{{name: direct, type: udp-server, address: "127.0.0.1:{direct}", '
-                                      f"streams: {ALL_OFF}}}"],
+    cfg = gcsd_config(run_dir, [mqtt, (f'{{name: direct, type: udp-server, address: "127.0.0.1:{direct}", '
+                                      f"streams: {ALL_OFF}}}")],
                       extra=f"vehicle: {{type: copter, sysid: {sysid}, count: {count}}}")
     return cfg, direct
 
@@ -176,8 +176,8 @@ def _vehicle_config(run_dir: Path, broker: str, topic: str, sysid: int, count: i
 def _ground_config(run_dir: Path, broker: str, topic: str) -> tuple[Path, int]:
     port = free_udp_port()
     cfg = gcsd_config(run_dir, [f'{{name: gcs, type: udp-server, address: "127.0.0.1:{port}"}}',
-                                f'{{name: fleet, type: mqtt, broker: "{broker}", topic: {topic}, role: ground, '
-                                f"streams: {ALL_OFF}}}"],
+                                (f'{{name: fleet, type: mqtt, broker: "{broker}", topic: {topic}, role: ground, '
+                                f"streams: {ALL_OFF}}}")],
                       extra=f"vehicle: {{type: companion, sysid: {GROUND_SYSID}}}")
     return cfg, port
 
@@ -354,10 +354,10 @@ def measure(workdir: Path, quick: bool = False, env=None, window_s: float | None
 
 
 def table(res: FleetResult) -> str:
-    out = [f"Fleet: copters over vehicle-side gcsd processes -> Mosquitto -> ground-side gcsd -> UDP ground station "
-           f"(bench/fleet.py), {res.window_s:.0f} s windows", "",
-           "| profile | topics x vehicles | HEARTBEAT Hz min..max | msgs/s per vehicle min / median | lost | "
-           "CPU per vehicle, vehicle side | ground side CPU | mosquitto CPU | RTT p50/p99 broker | direct | sustained |",
+    out = [(f"Fleet: copters over vehicle-side gcsd processes -> Mosquitto -> ground-side gcsd -> UDP ground station "
+           f"(bench/fleet.py), {res.window_s:.0f} s windows"), "",
+           ("| profile | topics x vehicles | HEARTBEAT Hz min..max | msgs/s per vehicle min / median | lost | "
+           "CPU per vehicle, vehicle side | ground side CPU | mosquitto CPU | RTT p50/p99 broker | direct | sustained |"),
            "|---|---|---|---|---:|---:|---:|---:|---|---|---|"]
     for t in res.trials:
         if t.error:

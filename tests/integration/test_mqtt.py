@@ -37,7 +37,7 @@ from gcsd.mission import MissionItem
 from gcsd.mqtt import MqttLink
 
 from .bridge import NullModem
-from .helpers import M, Client, pump, udp_channel, udp_url, wait_for
+from .helpers import Client, M, pump, udp_channel, udp_url, wait_for
 from .mission_client import MissionClient
 from .mosquitto import Mosquitto, mosquitto_binary, password_file, tls_files
 

@@ -71,8 +71,8 @@ def test_broker_urls(url, expected):
 
 
 @pytest.mark.parametrize("extra, line, message", [
-    ("broker: tcp://x:1883", 4, "fleet.yaml:4: channels[0].broker: expected mqtt://HOST[:PORT] or mqtts://HOST[:PORT], "
-                                "got 'tcp://x:1883'"),
+    ("broker: tcp://x:1883", 4, ("fleet.yaml:4: channels[0].broker: expected mqtt://HOST[:PORT] or mqtts://HOST[:PORT], "
+                                "got 'tcp://x:1883'")),
     ("broker: mqtt://user:pw@x", 4, "credentials go in username and password_file"),
     ("broker: mqtt://x:70000", 4, "port must be 1..65535, got 70000"),
     ("broker: mqtt://::1:1883", 4, "an IPv6 address goes in brackets"),
