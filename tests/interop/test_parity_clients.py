@@ -20,9 +20,9 @@ from .conftest import expect_line, mavproxy_script
 
 pytest.importorskip("mavsdk.asyncio", reason="mavsdk is a test extra: pip install -e .[test]")
 
-from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
-from mavsdk.asyncio.plugins.param import ParamAsync  # noqa: E402
-from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
+from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
+from mavsdk.asyncio.plugins.param import ParamAsync
+from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
 DISCOVERY_WAIT_S = 5.0
 
@@ -74,7 +74,7 @@ def test_mavproxy_connects_without_a_spurious_fence_breach(gcsd_daemon, spawn, t
     )
     try:
         expect_line(process, daemon, r"Detected vehicle 1:1 on link 0", 10.0, 0, "the vehicle")
-        index, _, _ = expect_line(process, daemon, r"fence present", 10.0, 0, "that the fence module read SYS_STATUS")
+        expect_line(process, daemon, r"fence present", 10.0, 0, "that the fence module read SYS_STATUS")
         # a later SYS_STATUS has been through the same handler once MAVProxy answers `status SYS_STATUS`
         since = len(process.output)
         process.send_line("status SYS_STATUS")
@@ -82,5 +82,31 @@ def test_mavproxy_connects_without_a_spurious_fence_breach(gcsd_daemon, spawn, t
         text = process.output.text()
         assert "fence breach" not in text, process.describe()
         assert "fence disabled" not in text  # it was never enabled: FENCE_ENABLE 0
+    finally:
+        process.stop(5.0, end_of_input_first=True)
+
+
+@pytest.mark.interop
+def test_mavproxy_runs_the_compass_and_accelerometer_calibrations(gcsd_daemon, spawn, tmp_path):
+    """MAVProxy's calibration module: `magcal start` (autosave) prints each compass's report;
+    `accelcal` waits for each "Place vehicle ..." and answers the Enter key with a COMMAND_ACK."""
+    daemon = gcsd_daemon()
+    process = spawn(
+        [sys.executable, mavproxy_script(), f"--master=udpout:127.0.0.1:{daemon.port('gcs')}", "--no-state",
+         "--default-modules=mode,arm,calibration"],
+        name="mavproxy", cwd=tmp_path, env_overrides={"HOME": str(tmp_path)},
+    )
+    try:
+        expect_line(process, daemon, r"Detected vehicle 1:1 on link 0", 10.0, 0, "the vehicle")
+        since = len(process.output)
+        process.send_line("magcal start")
+        expect_line(process, daemon, r"Calibration of compass 0 SUCCESS: fitness", 10.0, since, "compass 0's report")
+        since = len(process.output)
+        process.send_line("accelcal")
+        for where in ("level", "on its LEFT side", "on its RIGHT side", "nose DOWN", "nose UP", "on its BACK"):
+            index, _, _ = expect_line(process, daemon, rf"Place vehicle {where} and press any key", 5.0, since, where)
+            since = index + 1
+            process.send_line("")  # the Enter key
+        expect_line(process, daemon, r"Calibration successful", 5.0, since, "the end of the accelerometer calibration")
     finally:
         process.stop(5.0, end_of_input_first=True)
