@@ -19,8 +19,9 @@ HEARTBEAT (sysid 255) each second and counts every datagram by source and messag
 MAVLink header, and the sequence gaps per source (a lost frame anywhere on the path is a gap:
 forwarding is byte-exact, sequence numbers included). After every vehicle is heard and 4 s of
 settling, a window of W seconds: each process's CPU ((utime + stime) / W from /proc, % of one
-core), each vehicle's HEARTBEAT/s, its messages/s, per message type for the fleet profile, and the
-gaps. A fleet is *sustained* when every vehicle's HEARTBEAT rate is 1 Hz +- 10 %, (fleet profile)
+core), each vehicle's HEARTBEAT rate and (fleet profile) its SYS_STATUS and GLOBAL_POSITION_INT
+rates, each from the intervals between its first and last arrival in the window, its messages/s,
+and the gaps. A fleet is *sustained* when every vehicle's HEARTBEAT rate is 1 Hz +- 10 %, (fleet profile)
 its SYS_STATUS and GLOBAL_POSITION_INT rates too, (default profile) its messages/s are at least
 95 % of the median of the smallest default trial, no frame was lost, and no process used 90 % of a
 core or more.
@@ -118,8 +119,18 @@ class Station:
 
     def reset(self) -> None:
         self.counts: dict[tuple[int, int], int] = {}
+        self.first: dict[tuple[int, int], float] = {}  # (sysid, msgid) -> first and last arrival
+        self.last: dict[tuple[int, int], float] = {}
         self.lost = 0
         self.frames = 0
+
+    def rate_hz(self, sysid: int, msgid: int) -> float:
+        """From the intervals between the first and last arrival (a count over the window would be
+        off by one period at its edges: 7 HEARTBEATs in a 6 s window is not 1.17 Hz)."""
+        key = (sysid, msgid)
+        n = self.counts.get(key, 0)
+        span = self.last.get(key, 0.0) - self.first.get(key, 0.0)
+        return (n - 1) / span if n >= 2 and span > 0 else 0.0
 
     def fileno(self) -> int:
         return self.sock.fileno()
@@ -128,7 +139,8 @@ class Station:
         self.sock.sendto(data, addr or self.addr)
 
     def drain(self) -> None:
-        counts, last_seq = self.counts, self.last_seq
+        counts, last_seq, first, last_t = self.counts, self.last_seq, self.first, self.last
+        now = time.monotonic()
         while True:
             try:
                 data = self.sock.recv(65536)
@@ -143,6 +155,8 @@ class Station:
             self.frames += 1
             key = (sysid, msgid)
             counts[key] = counts.get(key, 0) + 1
+            first.setdefault(key, now)
+            last_t[key] = now
             src = (sysid, compid)
             last = last_seq.get(src)
             if last is not None:
@@ -297,10 +311,10 @@ def _summarise(t: Trial, stations: list[Station], wanted: set[int], elapsed: flo
     hbs, msgs, types = [], [], []
     for s in stations:
         for sysid in wanted:
-            hbs.append(s.counts.get((sysid, M.MAVLINK_MSG_ID_HEARTBEAT), 0) / elapsed)
+            hbs.append(s.rate_hz(sysid, M.MAVLINK_MSG_ID_HEARTBEAT))
             msgs.append(sum(c for (src, _), c in s.counts.items() if src == sysid) / elapsed)
             if t.profile == "fleet":
-                types += [s.counts.get((sysid, m), 0) / elapsed for m in FLEET_MESSAGES]
+                types += [s.rate_hz(sysid, m) for m in FLEET_MESSAGES]
     t.heard = sum(1 for m in msgs if m > 0)
     t.hb_min, t.hb_max = min(hbs), max(hbs)
     t.msgs_min, t.msgs_median = min(msgs), statistics.median(msgs)
