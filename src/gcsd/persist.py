@@ -13,8 +13,10 @@ and `persist_failed(error)` take the outcome. This adapter only does the I/O:
 - `flush()` at a clean stop: cancel the timer, wait for the write in flight, write what is
   still dirty, synchronously, and stop the worker thread.
 
-With no running loop (a node built outside asyncio, unit tests) `kick` does nothing and
-`flush` writes. Errors never escape: a failed write goes to the source, which retries.
+With no running loop (a node built outside asyncio: the unit-test harness, a script) there is
+nothing to block: `kick` writes at once, synchronously, when the file is due, and otherwise
+leaves it to the next `kick` or to `flush`. Errors never escape: a failed write goes to the
+source, which retries.
 """
 
 from __future__ import annotations
@@ -62,7 +64,8 @@ class WriteBehind:
             return
         try:
             self._loop = asyncio.get_running_loop()
-        except RuntimeError:  # no loop: flush() will write
+        except RuntimeError:  # no loop, nothing to block: write now if due
+            self._write_now(self.source.take_persist(self._now()))
             return
         self._timer = self._loop.call_later(max(0.0, deadline - self._now()), self._due)
 
@@ -101,17 +104,21 @@ class WriteBehind:
         if self._inflight is not None:
             inflight, self._inflight = self._inflight, None
             self._outcome(inflight.exception())  # waits for the write in flight
-        text = self.source.take_persist(self._now(), force=True)
-        if text is not None:
-            try:
-                self._write(self.path, text)
-            except Exception as exc:  # noqa: BLE001 - the source logs and reports it
-                self._outcome(exc)
-            else:
-                self._outcome(None)
+        self._write_now(self.source.take_persist(self._now(), force=True))
         if self._executor is not None:
             self._executor.shutdown(wait=True)
             self._executor = None
+
+
+    def _write_now(self, text: str | None) -> None:
+        if text is None:
+            return
+        try:
+            self._write(self.path, text)
+        except Exception as exc:  # noqa: BLE001 - the source logs and reports it
+            self._outcome(exc)
+        else:
+            self._outcome(None)
 
 
 def _call_soon(loop: asyncio.AbstractEventLoop | None, fn, arg) -> None:

@@ -78,7 +78,7 @@ def test_a_burst_of_sets_is_two_writes_on_a_worker_thread_and_the_loop_never_wai
     assert len(write.calls) == 1 + math.ceil(burst_s), (burst_s, write.calls)
     assert write.calls[1][0] - write.calls[0][0] >= 0.99
     assert all(name.startswith("gcsd-persist") for _, name in write.calls)
-    assert max(lateness) < 0.1, f"the loop waited {max(lateness):.3f} s (a write takes 0.3 s)"
+    assert max(lateness) < 0.2, f"the loop waited {max(lateness):.3f} s (a write takes 0.3 s)"
     values, problems = read_parm(tmp_path / "mav.parm")
     assert problems == [] and values[f"P{sets % 250:04d}"] == sets
 
@@ -117,11 +117,12 @@ def test_a_failed_write_is_reported_and_retried_a_second_later(tmp_path):
     assert read_parm(tmp_path / "mav.parm")[0]["ANGLE_MAX"] == 4500
 
 
-def test_without_an_event_loop_nothing_is_written_until_flush(tmp_path):
+def test_without_an_event_loop_a_due_write_is_made_at_once_and_the_rest_by_flush(tmp_path):
     write = RecordingWrite()
     svc, writer = service_and_writer(tmp_path, write)
     param_set(svc, "ANGLE_MAX", 4500, now=time.monotonic())
-    assert write.calls == [] and not (tmp_path / "mav.parm").exists()
+    assert len(write.calls) == 1 and write.calls[0][1] == threading.current_thread().name
+    param_set(svc, "ANGLE_MAX", 4600, now=time.monotonic())  # within the second: waits
+    assert len(write.calls) == 1 and read_parm(tmp_path / "mav.parm")[0]["ANGLE_MAX"] == 4500
     writer.flush()
-    assert len(write.calls) == 1
-    assert read_parm(tmp_path / "mav.parm")[0]["ANGLE_MAX"] == 4500
+    assert len(write.calls) == 2 and read_parm(tmp_path / "mav.parm")[0]["ANGLE_MAX"] == 4600
