@@ -7,6 +7,7 @@ AUTOPILOT_VERSION report the release the names belong to (ArduPilot 4.6.3, offic
 from __future__ import annotations
 
 import struct
+import time
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
@@ -106,3 +107,24 @@ def test_autopilot_version_is_ardupilot_4_6_3_official_with_its_git_hash(daemon,
     v = r.msg.flight_sw_version
     assert (v >> 24, (v >> 16) & 0xFF, (v >> 8) & 0xFF, v & 0xFF) == (4, 6, 3, M.FIRMWARE_VERSION_TYPE_OFFICIAL)
     assert bytes(r.msg.flight_custom_version) == b"3fc7011a"
+
+
+def test_a_flight_mode_switch_on_rc_channels_override_changes_the_heartbeat_mode(daemon, client):
+    """QGroundControl's Flight Modes page writes FLTMODE_CH / FLTMODE1..6; a joystick or MAVProxy's
+    `rc 7 1900` then moves the switch: the HEARTBEAT's custom_mode follows after 200 ms."""
+    d = daemon({"channels": [udp_channel("gcs")]})
+    c = client(udp_url(d.port("gcs")))
+    c.heartbeat()
+    for name, value in (("FLTMODE_CH", 7.0), ("FLTMODE6", 5.0)):  # channel 7, position 6: LOITER
+        mark = c.mark()
+        c.send(M.MAVLink_param_set_message(*VEHICLE, name.encode(), value, M.MAV_PARAM_TYPE_INT8))
+        echo = wait_for(c, lambda r, n=name: r.type == "PARAM_VALUE" and _name(r.msg.param_id) == n, since=mark)
+        assert echo is not None and echo.msg.param_value == value
+    channels = [65535] * 18
+    channels[6] = 1900
+    mark = c.mark()
+    sent = time.monotonic()
+    c.send(M.MAVLink_rc_channels_override_message(*VEHICLE, *channels))
+    loiter = wait_for(c, lambda r: is_type("HEARTBEAT", VEHICLE)(r) and r.msg.custom_mode == 5, 3.0, since=mark)
+    assert loiter is not None
+    assert loiter.t - sent >= 0.19  # not before the switch settled (200 ms)
