@@ -8,6 +8,7 @@ the same daemon (a served station keeps receiving, a fresh signed request is ans
 from __future__ import annotations
 
 import asyncio
+import json
 import socket
 import subprocess
 import sys
@@ -211,7 +212,7 @@ def test_radio_status_does_not_set_a_peers_version(daemon, client):
 
 # --- error boundaries ----------------------------------------------------------------------
 
-def test_a_raising_producer_is_counted_and_everything_else_keeps_streaming(daemon, client, monkeypatch):
+def test_a_raising_producer_is_counted_and_everything_else_keeps_streaming(daemon, client, monkeypatch, tmp_path):
     from gcsd import telemetry
 
     def broken(node, channel, now):
@@ -226,6 +227,15 @@ def test_a_raising_producer_is_counted_and_everything_else_keeps_streaming(daemo
     assert {"HEARTBEAT", "ATTITUDE", "GLOBAL_POSITION_INT", "VFR_HUD"} <= kinds
     assert "SYS_STATUS" not in kinds
     assert d.status()["errors"]["producer:SYS_STATUS"] >= 2
+    conf = tmp_path / "same.yaml"
+    conf.write_text(f"state_dir: {d.config.state_dir}\n")
+    shown = subprocess.run([sys.executable, "-m", "gcsd", "status", "-c", str(conf), "--json"], check=False,
+                           capture_output=True, text=True, timeout=20)
+    assert shown.returncode == 0, shown.stderr
+    assert json.loads(shown.stdout)["errors"]["producer:SYS_STATUS"] >= 2, "gcsd status shows it"
+    table = subprocess.run([sys.executable, "-m", "gcsd", "status", "-c", str(conf)], check=False,
+                           capture_output=True, text=True, timeout=20)
+    assert "producer:SYS_STATUS" in table.stdout
 
 
 class _RaisingBackend:
