@@ -82,3 +82,9 @@ def test_command_acks_with_zero_params_match_ardupilot_or_are_documented(daemon,
     assert agreement >= MIN_AGREEMENT
     stale = {name for (v, name) in documented if v == vehicle and name not in differences}
     assert not stale, f"docs/commands.md lists differences that no longer exist: {sorted(stale)}"
+
+
+def test_plane_answers_do_change_altitude_with_zero_params_which_stopped_arduplane_sitl(daemon, client):
+    """ArduPlane SITL aborted ("Should not be called on invalid location") on this command; gcsd answers."""
+    got = _results(daemon, client, "plane", ["MAV_CMD_DO_CHANGE_ALTITUDE", "MAV_CMD_DO_CHANGE_ALTITUDE"])
+    assert got["MAV_CMD_DO_CHANGE_ALTITUDE"] is not None
