@@ -82,9 +82,10 @@ def test_sigkill_at_random_moments_never_leaves_a_torn_state_file(tmp_path):
         "channels": [{"name": "gcs", "type": "udp-server", "address": f"127.0.0.1:{port}"}],
     }))
     kills_during_writes = 0
+    env = {**os.environ, "XDG_RUNTIME_DIR": str(tmp_path / "run")}  # killed daemons' registrations stay here
     for round_ in range(ROUNDS):
         (state / "gcsd.sock").unlink(missing_ok=True)  # left by the last SIGKILL: wait for this round's
-        proc = subprocess.Popen([sys.executable, "-m", "gcsd", "run", "-c", str(cfg)],
+        proc = subprocess.Popen([sys.executable, "-m", "gcsd", "run", "-c", str(cfg)], env=env,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         c = Client(f"udpout:127.0.0.1:{port}", 255, 190)
         try:
