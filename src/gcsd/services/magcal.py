@@ -129,7 +129,7 @@ class MagCal:
             mask |= 1 << i
         return mask
 
-    def _simulated_error(self, index: int) -> tuple:
+    def simulated_error(self, index: int) -> tuple:
         p = self.params
         n = index + 1
 
@@ -173,7 +173,7 @@ class MagCal:
                 pct = 0
             elif elapsed >= MAG_CAL_S:
                 run.status = M.MAG_CAL_SUCCESS
-                run.result = self._simulated_error(run.index)
+                run.result = self.simulated_error(run.index)
                 if self.autosave:
                     self._save(run)
                 run.reports_left -= 1

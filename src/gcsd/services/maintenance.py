@@ -293,7 +293,7 @@ class MaintenanceService(Service):
         if self.node.state.armed or not compasses:
             return FAILED
         for index in compasses:
-            offsets, _diag, _offdiag = self.mag._simulated_error(index)
+            offsets, _diag, _offdiag = self.mag.simulated_error(index)
             for name, value in zip(compass_params(index, "OFS"), offsets):
                 self._set(name, value)
         self._save_params()
