@@ -18,7 +18,9 @@ retained. Topics under the channel's `topic` prefix T:
 
 The broker is one peer of the channel while connected: the channel's counters count frames
 and bytes as for any link, a payload that is not whole frames is a parse error, and frames
-from every source go through the router. Frames are published only while connected; a frame
+from every source go through the router. Also counted as parse errors and dropped unparsed: a
+payload over MAX_PAYLOAD_BYTES, and (role ground) a frame on T/up/S/C whose source is not S, so
+that broker ACLs giving each vehicle only its own up/S topic cannot be bypassed. Frames are published only while connected; a frame
 that finds the connection down or more than MAX_PENDING_FRAMES not yet written to the socket
 is a counted drop, never an unbounded queue.
 
@@ -59,7 +61,7 @@ import paho.mqtt.client as paho
 import structlog
 from paho.mqtt.enums import CallbackAPIVersion, MQTTErrorCode
 
-from .codec import MESSAGE_INFO, STX_V2
+from .codec import MESSAGE_INFO, STX_V1, STX_V2
 from .config_mqtt import MqttConfig
 
 log = structlog.get_logger("gcsd.mqtt")
@@ -69,6 +71,7 @@ CONNECT_TIMEOUT_S = 5.0  # TCP + TLS handshake
 CONNACK_TIMEOUT_S = 10.0  # CONNACK and SUBACK
 MAX_PENDING_FRAMES = 4096  # published but not yet written to the socket (about 1 MB): beyond, drop
 DRAIN_BATCH = 256  # MQTT packets read per readiness event
+MAX_PAYLOAD_BYTES = 4 * 280  # one frame is at most 280 bytes; a bigger payload is dropped unparsed
 MAX_SYSID = 255
 
 
@@ -91,6 +94,15 @@ def frame_target_system(raw: bytes) -> int:
     if info is None or info.target_system_ofs < 0 or info.target_system_ofs >= raw[1]:
         return 0
     return raw[hlen + info.target_system_ofs]
+
+
+def _source_matches(topic: str, payload: bytes) -> bool:
+    """Role ground: a message on TOPIC/up/S/C must carry a frame from S (so a broker ACL that lets
+    each vehicle publish only under its own up/S is not bypassed by a spoofed source sysid)."""
+    if len(payload) < 6 or payload[0] not in (STX_V1, STX_V2):
+        return True  # not a frame: the parser counts it
+    sysid = payload[5] if payload[0] == STX_V2 else payload[3]
+    return topic.rsplit("/", 2)[-2] == str(sysid)
 
 
 class Topics:
@@ -280,8 +292,12 @@ class MqttLink:
         if peer is None:
             return
         channel = self.channel
+        payload = message.payload
+        if len(payload) > MAX_PAYLOAD_BYTES or (self.ground and not _source_matches(message.topic, payload)):
+            peer.parser.stats.parse_errors += 1  # not what this link carries: dropped unparsed
+            return
         try:
-            channel.receive(peer, message.payload, channel.clock(), datagram=True)
+            channel.receive(peer, payload, channel.clock(), datagram=True)
         except Exception:  # paho would swallow it silently (suppress_exceptions): say so, carry on
             self.receive_errors += 1
             if self.receive_errors <= 10 or self.receive_errors % 1000 == 0:

@@ -15,6 +15,7 @@ topics and the bytes on them are checked directly.
 5. mqtts:// with a CA file and username + password_file against a TLS, password-only broker; a
    wrong password is refused (the channel's open fails, so run_channel retries).
 6. Two ground sides split one fleet by `sysids`; 7. `no_forward` on an mqtt channel is honoured.
+8. Garbage, truncated, oversized and spoofed-source messages on the broker are counted and dropped.
 """
 
 from __future__ import annotations
@@ -95,6 +96,9 @@ class Tap:
     def since(self, mark: int) -> list[tuple[str, bytes]]:
         with self._lock:
             return self.messages[mark:]
+
+    def publish(self, topic: str, payload: bytes) -> None:
+        self.client.publish(topic, payload, 0).wait_for_publish(5)
 
     def close(self) -> None:
         self.client.disconnect()
@@ -384,3 +388,28 @@ def test_no_forward_on_the_mqtt_channel_is_honoured_like_on_any_channel(broker, 
     assert (GROUND_SYSID, 191) in seen, "the ground side itself is heard"
     assert ground.stats("fleet")["packets_in"] > 0, "the fleet's frames reach the ground side"
     assert not {1, 2} & {s for s, _ in seen}, "but a no_forward channel's frames are not forwarded"
+
+
+def test_garbage_oversized_and_spoofed_messages_are_counted_and_dropped(broker, daemon, client, tap, tmp_path):
+    topic = "gcsd/hostile"
+    daemon(vehicle_side(tmp_path, "v", broker, topic, sysid=3))
+    ground = daemon(ground_side(tmp_path, broker, topic))
+    gcs = client(udp_url(ground.port("gcs")))
+    assert (3, 1) in heard_all(gcs, {(3, 1)})
+    before = ground.stats("fleet")["parse_errors"]
+    spoofed = packed_heartbeat(9)  # a good frame from sysid 9, on vehicle 3's topic
+    attacker = tap(f"{topic}/nothing")
+    mark = gcs.mark()
+    attacker.publish(f"{topic}/up/3/1", b"\x00garbage, not MAVLink")
+    attacker.publish(f"{topic}/up/3/1", spoofed[:-4])  # truncated
+    attacker.publish(f"{topic}/up/3/1", spoofed * 200)  # oversized
+    attacker.publish(f"{topic}/up/3/1", spoofed)
+    assert heard_all(gcs, {(3, 1)}).get((3, 1)), "the ground side still routes the fleet"
+    pump([gcs], 0.5)
+    assert 9 not in {r.src[0] for r in gcs.since(mark, "HEARTBEAT")}, "the spoofed source was not routed"
+    assert ground.stats("fleet")["parse_errors"] >= before + 4
+
+
+def packed_heartbeat(sysid: int) -> bytes:
+    mav = M.MAVLink(None, srcSystem=sysid, srcComponent=1)
+    return bytes(M.MAVLink_heartbeat_message(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 0, 3).pack(mav))
