@@ -1,6 +1,6 @@
 """Configuration: a YAML file validated into frozen dataclasses.
 
-The text is *composed* into PyYAML nodes, not loaded, so every value keeps its line. A `_Reader`
+The text is *composed* into PyYAML nodes, not loaded, so every value keeps its line. A `Reader`
 walks the nodes section by section; each check returns the value, or records a problem
 ``FILE:LINE: key.path: what is wrong`` and returns the key's default, and the walk goes on. One
 pass finds every problem; `ConfigError` carries them all, sorted by line.
@@ -28,7 +28,6 @@ later against the filesystem (preflight.py) report ``FILE:LINE: key.path: what``
 
 from __future__ import annotations
 
-import difflib
 import os
 import re
 from collections.abc import Mapping
@@ -37,9 +36,10 @@ from pathlib import Path, PurePath
 from types import MappingProxyType
 
 import yaml
-from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
+from yaml.nodes import MappingNode, SequenceNode
 
 from .config_mqtt import MQTT_KEYS, MqttConfig, read_mqtt
+from .config_reader import Field, Reader, Section, describe, is_null, line_of
 
 STREAM_NAMES = ("raw_sens", "ext_stat", "rc_chan", "raw_ctrl", "position",
                 "extra1", "extra2", "extra3", "params", "adsb")
@@ -233,11 +233,11 @@ def parse_config(text: str, filename: str = "<config>") -> Config:
         raise ConfigError([f"{filename}:{line}: invalid YAML: {what}"]) from None
     except RecursionError:  # not reached after _check_depth; kept so no input can give a traceback
         raise ConfigError([f"{filename}:1: invalid YAML: nested too deeply"]) from None
-    if root is not None and not _is_null(root) and not isinstance(root, MappingNode):
-        where = f"{filename}:{_line(root)}"
-        raise ConfigError([f"{where}: expected a mapping of sections at the top level, got {_describe(root)}"])
-    reader = _Reader(filename)
-    config = _config(reader, reader.section(_Field(root, ""), _TOP_KEYS))
+    if root is not None and not is_null(root) and not isinstance(root, MappingNode):
+        where = f"{filename}:{line_of(root)}"
+        raise ConfigError([f"{where}: expected a mapping of sections at the top level, got {describe(root)}"])
+    reader = Reader(filename)
+    config = _config(reader, reader.section(Field(root, ""), _TOP_KEYS))
     if reader.problems:
         raise ConfigError([message for _, message in sorted(reader.problems, key=lambda p: p[0])])
     return replace(config, source=Source(filename, MappingProxyType(reader.lines)))
@@ -272,7 +272,7 @@ _ADDRESS = re.compile(r"(?:\[(?P<ipv6>[^\]\x00-\x1f]+)\]|(?P<host>[^:\s\[\]\x00-
                       re.ASCII)
 
 
-def _config(r: _Reader, top: _Section) -> Config:
+def _config(r: Reader, top: Section) -> Config:
     ftp = r.section(top["ftp"], ("root", "max_file_bytes"))
     log = r.section(top["log"], ("level", "format", "tlog"))
     gcs = r.section(top["gcs"], ("sysid", "enforce_sysid"))
@@ -297,7 +297,7 @@ def _config(r: _Reader, top: _Section) -> Config:
     )
 
 
-def _serial_control(r: _Reader, f: _Field, channels: tuple[ChannelConfig, ...]) -> tuple[SerialControlPort, ...]:
+def _serial_control(r: Reader, f: Field, channels: tuple[ChannelConfig, ...]) -> tuple[SerialControlPort, ...]:
     ports = []
     seen: set[str] = set()
     taken = {os.path.normpath(ch.device): i for i, ch in enumerate(channels) if ch.type == "serial" and ch.device}
@@ -324,7 +324,7 @@ def _serial_control(r: _Reader, f: _Field, channels: tuple[ChannelConfig, ...]) 
     return tuple(p for p in ports if p.port and p.device)
 
 
-def _vehicle(r: _Reader, v: _Section) -> VehicleConfig:
+def _vehicle(r: Reader, v: Section) -> VehicleConfig:
     vehicle_type = r.choice(v["type"], "copter", VEHICLE_TYPES)
     sysid = r.integer(v["sysid"], 1, 1, 255)
     compid = r.integer(v["compid"], None, 1, 255, nullable=True)
@@ -342,7 +342,7 @@ def _vehicle(r: _Reader, v: _Section) -> VehicleConfig:
     )
 
 
-def _mission(r: _Reader, m: _Section) -> MissionConfig:
+def _mission(r: Reader, m: Section) -> MissionConfig:
     d = MissionConfig()
     return MissionConfig(
         max_items=r.integer(m["max_items"], d.max_items, 1, MAX_MISSION_ITEMS),
@@ -352,7 +352,7 @@ def _mission(r: _Reader, m: _Section) -> MissionConfig:
     )
 
 
-def _ftp_root(r: _Reader, f: _Field) -> str:
+def _ftp_root(r: Reader, f: Field) -> str:
     root = PurePath(r.path(f, "ftp"))
     if root.is_absolute() or ".." in root.parts:
         return r.reject(f, "a path relative to state_dir without '..'", "ftp")
@@ -363,7 +363,7 @@ def _ftp_root(r: _Reader, f: _Field) -> str:
     return str(root)
 
 
-def _signing(r: _Reader, s: _Section) -> SigningConfig:
+def _signing(r: Reader, s: Section) -> SigningConfig:
     key = r.text(s["key"], None, nullable=True)
     if key is not None and not _SIGNING_KEY.fullmatch(key):  # the message must not echo the key
         got = f"{len(key)} characters" if len(key) != SIGNING_KEY_HEX_CHARS else "other characters"
@@ -373,8 +373,8 @@ def _signing(r: _Reader, s: _Section) -> SigningConfig:
                          require=r.boolean(s["require"], False))
 
 
-def _channels(r: _Reader, f: _Field) -> tuple[ChannelConfig, ...]:
-    if f.node is None or _is_null(f.node):
+def _channels(r: Reader, f: Field) -> tuple[ChannelConfig, ...]:
+    if f.node is None or is_null(f.node):
         return Config.channels
     if not isinstance(f.node, SequenceNode):
         return r.reject(f, "a list of channels", Config.channels)
@@ -383,10 +383,10 @@ def _channels(r: _Reader, f: _Field) -> tuple[ChannelConfig, ...]:
         r.problem(f, f"expected 1 to {MAX_CHANNELS} channels (SR0_ .. SR9_), got {len(items)}")
     first_index_by_name: dict[str, int] = {}
     channels = []
-    sections: list[_Section] = []
+    sections: list[Section] = []
     for index, item in enumerate(items):
-        r.lines.setdefault(f"{f.path}[{index}]", _line(item))
-        section = r.section(_Field(item, f"{f.path}[{index}]"), _CHANNEL_KEYS)
+        r.lines.setdefault(f"{f.path}[{index}]", line_of(item))
+        section = r.section(Field(item, f"{f.path}[{index}]"), _CHANNEL_KEYS)
         channel = _channel(r, section)
         if channel.name and channel.name in first_index_by_name:
             first = f"{f.path}[{first_index_by_name[channel.name]}]"
@@ -398,7 +398,7 @@ def _channels(r: _Reader, f: _Field) -> tuple[ChannelConfig, ...]:
     return tuple(channels)
 
 
-def _check_endpoints(r: _Reader, channels: list[ChannelConfig], sections: list[_Section]) -> None:
+def _check_endpoints(r: Reader, channels: list[ChannelConfig], sections: list[Section]) -> None:
     """Two channels must not share a listening port, a target or a serial device: the second
     server's bind fails (or, with SO_REUSEADDR semantics, the first one goes deaf), two clients
     to one address send everything twice, two readers of one device split its bytes."""
@@ -430,7 +430,7 @@ def _clash(a: ChannelConfig, b: ChannelConfig) -> str | None:
     return None
 
 
-def _channel(r: _Reader, c: _Section) -> ChannelConfig:
+def _channel(r: Reader, c: Section) -> ChannelConfig:
     for key in ("name", "type"):
         if key not in c and isinstance(c.node, MappingNode):
             r.problem(c[key], "required for every channel")
@@ -470,7 +470,7 @@ def _channel(r: _Reader, c: _Section) -> ChannelConfig:
     )
 
 
-def _address(r: _Reader, f: _Field) -> tuple[str, int] | None:
+def _address(r: Reader, f: Field) -> tuple[str, int] | None:
     text = r.text(f, None)
     match = _ADDRESS.fullmatch(text) if text is not None else None
     if text is not None and match is None:
@@ -480,158 +480,3 @@ def _address(r: _Reader, f: _Field) -> tuple[str, int] | None:
     elif match is not None:
         return match["ipv6"] or match["host"], int(match["port"])
     return None
-
-
-# --- the reader: nodes in, values or problems out ---------------------------------------------
-
-_NULL_TAG = "tag:yaml.org,2002:null"
-_STR_TAG = "tag:yaml.org,2002:str"
-_NOT_A_SCALAR = object()
-
-
-@dataclass(frozen=True)
-class _Field:
-    """A key's value node (None when the key is absent) and its key path, for messages."""
-
-    node: Node | None
-    path: str
-    parent: Node | None = None  # the mapping, to give a line to problems about absent keys
-
-
-class _Section:
-    """The known keys of one mapping; unknown and duplicate keys were reported when it was read."""
-
-    def __init__(self, node: Node | None, path: str, nodes: dict[str, Node]) -> None:
-        self.node, self.path, self.nodes = node, path, nodes
-
-    def __getitem__(self, key: str) -> _Field:
-        return _Field(self.nodes.get(key), f"{self.path}.{key}" if self.path else key, self.node)
-
-    def __contains__(self, key: str) -> bool:  # present in the file
-        return key in self.nodes
-
-
-class _Reader:
-    def __init__(self, filename: str) -> None:
-        self.filename = filename
-        self.problems: list[tuple[int, str]] = []
-        self.lines: dict[str, int] = {}  # key path -> line, for Config.source
-        self._constructor = yaml.constructor.SafeConstructor()
-
-    def problem(self, f: _Field, message: str) -> None:
-        node = f.node if f.node is not None else f.parent
-        line = _line(node) if node is not None else 1
-        self.problems.append((line, f"{self.filename}:{line}: {f.path}: {message}"))
-
-    def reject(self, f: _Field, wanted: str, default):
-        self.problem(f, f"expected {wanted}, got {_describe(f.node)}")
-        return default
-
-    def section(self, f: _Field, known: tuple[str, ...]) -> _Section:
-        if f.node is not None and not _is_null(f.node) and not isinstance(f.node, MappingNode):
-            self.reject(f, "a mapping", None)
-        if not isinstance(f.node, MappingNode):
-            return _Section(f.node, f.path, {})
-        nodes: dict[str, Node] = {}
-        for key_node, value_node in f.node.value:
-            key = key_node.value if isinstance(key_node, ScalarNode) else "?"
-            key_field = _Field(key_node, f"{f.path}.{key}" if f.path else key)
-            self.lines.setdefault(key_field.path, _line(key_node))
-            if key not in known:
-                self.problem(key_field, _unknown_key(key, known))
-            elif key in nodes:
-                self.problem(key_field, "duplicate key")
-            else:
-                nodes[key] = value_node
-        return _Section(f.node, f.path, nodes)
-
-    def sequence(self, f: _Field) -> list[_Field]:
-        if f.node is None or _is_null(f.node):
-            return []
-        if not isinstance(f.node, SequenceNode):
-            return self.reject(f, "a list", [])
-        items = [_Field(item, f"{f.path}[{i}]") for i, item in enumerate(f.node.value)]
-        for item in items:
-            self.lines.setdefault(item.path, _line(item.node))
-        return items
-
-    def scalar(self, node: Node):
-        if not isinstance(node, ScalarNode):
-            return _NOT_A_SCALAR
-        try:
-            return self._constructor.construct_object(node)
-        except (yaml.YAMLError, ValueError):
-            return _NOT_A_SCALAR
-
-    def checked(self, f: _Field, default, wanted: str, is_good, *, nullable: bool = False):
-        """The YAML value of a scalar if `is_good(value)`, else a problem and the default."""
-        if f.node is None or (nullable and _is_null(f.node)):
-            return default
-        value = self.scalar(f.node)
-        if value is _NOT_A_SCALAR or not is_good(value):
-            return self.reject(f, wanted + (" or null" if nullable else ""), default)
-        return value
-
-    def integer(self, f: _Field, default, low: int, high: int | None = None, *, nullable: bool = False):
-        wanted = f"an integer {low}..{high}" if high is not None else f"an integer >= {low}"
-        return self.checked(f, default, wanted, lambda v: type(v) is int and low <= v
-                            and (high is None or v <= high), nullable=nullable)
-
-    def number(self, f: _Field, default: float, low: float, high: float, *, low_open: bool = False) -> float:
-        wanted = f"a number > {low} and <= {high}" if low_open else f"a number {low}..{high}"
-        return float(self.checked(f, default, wanted, lambda v: type(v) in (int, float)
-                                  and (low < v if low_open else low <= v) and v <= high))
-
-    def boolean(self, f: _Field, default: bool) -> bool:
-        return self.checked(f, default, "true or false", lambda v: type(v) is bool)
-
-    def text(self, f: _Field, default, *, nullable: bool = False):
-        """The source text of a scalar, whatever YAML would make of it; empty text is a problem."""
-        if f.node is None or (nullable and _is_null(f.node)):
-            return default
-        if not isinstance(f.node, ScalarNode) or _is_null(f.node) or not f.node.value:
-            return self.reject(f, "a non-empty string" + (" or null" if nullable else ""), default)
-        return f.node.value
-
-    def path(self, f: _Field, default, *, nullable: bool = False):
-        """A file or directory name: text without NUL bytes (no system call can take one)."""
-        value = self.text(f, default, nullable=nullable)
-        if isinstance(value, str) and "\0" in value:
-            self.problem(f, "a path cannot contain a NUL byte")
-            return default
-        return value
-
-    def choice(self, f: _Field, default: str, choices: tuple[str, ...]) -> str:
-        value = self.text(f, None)
-        if value is None:
-            return default
-        if value not in choices:
-            self.problem(f, f"expected {'|'.join(choices)}, got {value!r}{_suggestion(value, choices)}")
-            return default
-        return value
-
-
-def _unknown_key(key: str, known: tuple[str, ...]) -> str:
-    return "unknown key" + (_suggestion(key, known) or f" (known keys: {', '.join(known)})")
-
-
-def _suggestion(word: str, known: tuple[str, ...]) -> str:
-    close = difflib.get_close_matches(word, known, n=1)
-    return f"; did you mean {close[0]!r}?" if close else ""
-
-
-def _is_null(node: Node) -> bool:
-    return isinstance(node, ScalarNode) and node.tag == _NULL_TAG
-
-
-def _line(node: Node) -> int:
-    return node.start_mark.line + 1
-
-
-def _describe(node: Node | None) -> str:
-    """A value as a message shows it: 'text', 300, true, null, a list, a mapping."""
-    if node is None or _is_null(node):
-        return "null"
-    if not isinstance(node, ScalarNode):
-        return "a mapping" if isinstance(node, MappingNode) else "a list"
-    return repr(node.value) if node.tag == _STR_TAG else node.value
