@@ -11,7 +11,9 @@ the same way, ``FILE:LINE: key.path: what is wrong`` (the line comes from `Confi
   `signing.key` and `mav.parm` (config.py already refuses "." in the text).
 - params_file must be readable, and every line good against the vehicle's real parameter set
   (services/params.params_file_problems, the very check the daemon makes when it loads it).
-- log.tlog must name a file in a directory that can be created.
+- In a swarm (vehicle.count > 1) params_file may not set SYSID_THISMAV: every vehicle would take
+  the same sysid; the swarm's sysids come from vehicle.sysid.
+- log.tlog must name a writable file in a directory that can be created.
 
 `check(config)` only looks (check-config: it must not create anything, and runs as the same
 user as the daemon under systemd's ExecStartPre); `prepare(config)` also creates the
@@ -31,7 +33,7 @@ def check(config: Config) -> list[str]:
     """Problems found without changing anything on disk."""
     problems = [*_state_dir_can_be_made(config), *_params_file(config)]
     if config.params_file is not None and not problems:
-        problems += _params_file_content(config)
+        problems += _params_file_content(config) or _swarm_sysid(config)
     if config.log.tlog:
         problems += _parent_can_be_made(config, "log.tlog", Path(config.log.tlog))
     return problems
@@ -40,6 +42,8 @@ def check(config: Config) -> list[str]:
 def prepare(config: Config) -> list[str]:
     """Create state_dir, the vehicle directories and the FTP roots; problems if that fails."""
     problems = _params_file(config)
+    if config.params_file is not None and not problems:
+        problems += _swarm_sysid(config)
     if config.log.tlog:
         problems += _parent_can_be_made(config, "log.tlog", Path(config.log.tlog))
     where = config.source.where("state_dir")
@@ -82,6 +86,8 @@ def _state_dir_can_be_made(config: Config) -> list[str]:
 def _parent_can_be_made(config: Config, key: str, path: Path) -> list[str]:
     if path.is_dir():
         return [f"{config.source.where(key)}: {_show(path)} is a directory"]
+    if path.exists() and not os.access(path, os.W_OK):
+        return [f"{config.source.where(key)}: {_show(path)} is not writable"]
     return _dir_can_be_made(config, key, path.parent)
 
 
@@ -127,6 +133,19 @@ def _params_file_content(config: Config) -> list[str]:
     from .services.params import params_file_problems
 
     return params_file_problems(vehicle_param_store(config), Path(config.params_file))
+
+
+def _swarm_sysid(config: Config) -> list[str]:
+    from .params.parmfile import read_parm_lines
+
+    if config.vehicle.count == 1:
+        return []
+    try:
+        lines, _ = read_parm_lines(Path(config.params_file))
+    except OSError:
+        return []  # reported by _params_file
+    return [f"{_show(config.params_file)}:{p.line}: SYSID_THISMAV: would give all {config.vehicle.count} vehicles "
+            f"of the swarm one sysid; their sysids come from vehicle.sysid" for p in lines if p.name == "SYSID_THISMAV"]
 
 
 def _probe_write(directory: Path) -> None:

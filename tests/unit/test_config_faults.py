@@ -195,7 +195,7 @@ def test_seeded_random_damage_to_the_shipped_file_never_raises_anything_but_conf
     pieces = list(":-[]{}&*!|>'\"%@`#,?\n \t\\0x.~") + ["\0", "\x85", "\ufeff", "!!python/object:os.system",
                                                         "&a ", "*a", "<<: *a", "!!binary", "0x", "1e999"]
     rng = random.Random(11)
-    for _ in range(400):
+    for _ in range(150):
         text = list(base)
         for _ in range(rng.randint(1, 6)):
             pos = rng.randrange(len(text))
@@ -309,6 +309,15 @@ def test_a_missing_params_file_names_the_config_line(here, capsys):
     config = write(here / "g.yaml", f"state_dir: st\nparams_file: missing.parm\nchannels: {LOOPBACK}\n")
     check, run = run_and_check(config, capsys)
     expected = (2, [f"{config}:2: params_file: cannot read missing.parm: No such file or directory"])
+    assert check == expected and run == expected
+
+
+def test_sysid_thismav_in_the_params_file_of_a_swarm_is_refused(here, capsys):
+    write(here / "p.parm", "RC4_TRIM 1480\nSYSID_THISMAV 7\n")
+    config = write(here / "g.yaml", f"vehicle: {{count: 3}}\nparams_file: p.parm\nstate_dir: st\nchannels: {LOOPBACK}\n")
+    check, run = run_and_check(config, capsys)
+    expected = (2, ["p.parm:2: SYSID_THISMAV: would give all 3 vehicles of the swarm one sysid; "
+                    "their sysids come from vehicle.sysid"])
     assert check == expected and run == expected
 
 
