@@ -53,7 +53,7 @@ class WriteBehind:
         self._inflight: concurrent.futures.Future | None = None
         self._executor: concurrent.futures.ThreadPoolExecutor | None = None
         self._closed = False
-        self.writes = 0  # files written (counted for `gcsd status` and tests)
+        self.writes = 0  # files written
 
     def kick(self) -> None:
         """The source is dirty: make sure a write happens at its deadline."""
@@ -108,7 +108,6 @@ class WriteBehind:
         if self._executor is not None:
             self._executor.shutdown(wait=True)
             self._executor = None
-
 
     def _write_now(self, text: str | None) -> None:
         if text is None:
