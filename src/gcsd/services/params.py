@@ -3,8 +3,11 @@
 - PARAM_REQUEST_LIST starts (or restarts) a list download for the requester, keyed by
   (sysid, compid, channel): two ground stations downloading at once each get every index. The
   banner STATUSTEXTs go first. Values are then streamed by `pending()` in the channel's send
-  pass: as many per pass as the byte budget allows (at most BURST per pass, then the pass
-  yields), so a 57600-baud radio is never flooded and loopback gets 1000 values in a blink.
+  pass: as many per pass as the byte budget allows, at most BURST per pass and one full burst
+  per BURST_INTERVAL_S (5 000 values a second: ArduCopter's 1 000 in 0.2 s), so a 57600-baud
+  radio is never flooded and a ground station reading a UDP socket with the kernel's default
+  buffer (pymavlink, QGroundControl) keeps up on loopback; ArduPilot paces its list the same way
+  (queued_param_send: at most 5 values per loop without flow control, ~2 000 a second).
   While a list streams, the link's telemetry is slowed x4.
 - PARAM_REQUEST_READ by index (index >= 0) or by name (index -1) is answered at once on the
   requesting link; an unknown name or index gets no reply (as ArduPilot).
@@ -48,7 +51,8 @@ from . import Incoming, Service
 
 log = structlog.get_logger("gcsd.params")
 
-BURST = 100  # PARAM_VALUEs per send pass on a link with room to spare
+BURST = 50  # PARAM_VALUEs per send pass on a link with room to spare
+BURST_INTERVAL_S = 0.01  # ...and at most one full burst per 10 ms
 PARAM_VALUE_BYTES = 37  # MAVLink2 PARAM_VALUE: 12 bytes of framing + 25 of payload
 PERSIST_INTERVAL_S = 1.0  # at most one write of mav.parm per second
 
@@ -127,13 +131,16 @@ class ParamService(Service):
         return format_parm(self.store.changed_from_default())
 
     def persist_done(self) -> None:
+        if self._failing:
+            log.info("params_save_recovered", path=str(self.save_path))
         self._failing = False
 
     def persist_failed(self, error: str) -> None:
-        """The write failed: try again a PERSIST_INTERVAL_S later; tell the ground stations once."""
-        log.error("params_save_failed", path=str(self.save_path), error=error)
+        """The write failed: try again a PERSIST_INTERVAL_S later; log it and tell the ground
+        stations once per run of failures (a full disk must not log every second)."""
         if not self._failing:
             self._failing = True
+            log.error("params_save_failed", path=str(self.save_path), error=error)
             self.node.send_text(M.MAV_SEVERITY_ERROR, "Param save failed")
         self.mark_dirty()
 
@@ -212,7 +219,7 @@ class ParamService(Service):
         if not any(k[2] == channel.index for k in self._lists):
             self.node.link(channel).set_slow("params", False)
             return None
-        return now
+        return now + BURST_INTERVAL_S if sent >= BURST else now
 
 
 def params_file_problems(store: ParamStore, path: Path) -> list[str]:
