@@ -15,7 +15,7 @@ import gcsd.services.params as params_module
 from gcsd.params import INT16, REAL32, ParamDef, ParamStore
 from gcsd.params.parmfile import parse_parm
 from gcsd.services import Incoming
-from gcsd.services.params import BURST, PARAM_VALUE_BYTES, PERSIST_INTERVAL_S, ParamService
+from gcsd.services.params import BURST, BURST_INTERVAL_S, PARAM_VALUE_BYTES, PERSIST_INTERVAL_S, ParamService
 
 GCS = (255, 190)
 
@@ -244,11 +244,15 @@ def test_list_sends_the_banner_slows_telemetry_and_streams_burst_per_pass(svc):
     request_list(svc, ch0)
     assert svc.node.texts[0][1] == "banner" and svc.node.slow == [(0, True)] and svc.node.woken == [0]
     sent = []
-    assert svc.pending(ch0, 1.0, lambda m: sent.append(m) or True) == 1.0  # more to send: come back now
+    now = 1.0
+    deadline = svc.pending(ch0, now, lambda m: sent.append(m) or True)
+    assert deadline == now + BURST_INTERVAL_S  # a full burst: the next one after the interval
     assert len(sent) == BURST and [m.param_index for m in sent] == list(range(BURST))
-    while (deadline := svc.pending(ch0, 1.0, lambda m: sent.append(m) or True)) is not None:
-        assert deadline == 1.0
+    while deadline is not None:
+        now = deadline
+        deadline = svc.pending(ch0, now, lambda m: sent.append(m) or True)
     assert [m.param_index for m in sent] == list(range(len(svc.store)))
+    assert now == 1.0 + (len(svc.store) // BURST) * BURST_INTERVAL_S
     assert svc.node.slow == [(0, True), (0, False)]
 
 
