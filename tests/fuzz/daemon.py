@@ -37,15 +37,13 @@ class FuzzedDaemon:
         probe.bind(("127.0.0.1", 0))
         self.port = probe.getsockname()[1]
         probe.close()
-        config = tmp_path / "gcsd.yaml"
-        config.write_text(
+        self.config = tmp_path / "gcsd.yaml"
+        self.config.write_text(
             f"vehicle: {{type: {vehicle}}}\nstate_dir: {tmp_path / 'state'}\nlog: {{level: info, format: json}}\n"
             f"channels:\n  - {{name: gcs, type: udp-server, address: '127.0.0.1:{self.port}'}}\n")
         self.log_path = tmp_path / "gcsd.log"
-        self._log = self.log_path.open("wb")
-        env = dict(os.environ, PATH=str(Path(sys.executable).parent) + os.pathsep + os.environ.get("PATH", ""))
-        self.proc = subprocess.Popen([sys.executable, "-m", "gcsd", "run", "-c", str(config)],
-                                     stdout=self._log, stderr=subprocess.STDOUT, env=env)
+        self._log = self.log_path.open("ab")
+        self._launch()
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.connect(("127.0.0.1", self.port))
         self.sock.setblocking(False)
@@ -53,6 +51,19 @@ class FuzzedDaemon:
         self.mav.robust_parsing = True
         self.barriers = 0
         self.heartbeats: list[float] = []
+
+    def _launch(self) -> None:
+        env = dict(os.environ, PATH=str(Path(sys.executable).parent) + os.pathsep + os.environ.get("PATH", ""))
+        self.proc = subprocess.Popen([sys.executable, "-m", "gcsd", "run", "-c", str(self.config)],
+                                     stdout=self._log, stderr=subprocess.STDOUT, env=env)
+
+    def restart(self) -> int:
+        """A clean stop (SIGTERM) and a new start on the same state directory: the stop's exit code."""
+        self.proc.send_signal(signal.SIGTERM)
+        code = self.proc.wait(10)
+        self._launch()
+        self.start()
+        return code
 
     # --- io --------------------------------------------------------------------------------------
     def send(self, frame: bytes) -> None:
@@ -148,7 +159,6 @@ class FuzzedDaemon:
         self.sock.close()
         self._log.close()
 
-
     # --- a plain ground station ---------------------------------------------------------------
     def command(self, command: int, *params: float) -> int | None:
         """COMMAND_LONG, resent until its COMMAND_ACK: the result, or None."""
@@ -176,6 +186,28 @@ class FuzzedDaemon:
                 last.seq = got.seq
                 self.send_msg(last)
         return None
+
+    def param_names(self) -> list[str]:
+        """Every parameter name, read by index (PARAM_REQUEST_READ, 100 in flight; a list download is
+        paced, reads are not)."""
+        first = self.wait_for(lambda m: m.get_type() == "PARAM_VALUE" and m.param_index == 0, BARRIER_TIMEOUT_S,
+                              resend=lambda: self.send_msg(M.MAVLink_param_request_read_message(*VEHICLE, b"", 0)))
+        assert first is not None, "PARAM_REQUEST_READ of index 0 not answered"
+        count = first.param_count
+        names: dict[int, str] = {0: first.param_id}
+        end = time.monotonic() + 20.0
+        while len(names) < count and time.monotonic() < end:
+            batch = [i for i in range(count) if i not in names][:100]
+            for i in batch:
+                self.send_msg(M.MAVLink_param_request_read_message(*VEHICLE, b"", i))
+            quiet = time.monotonic() + 0.3
+            while time.monotonic() < quiet and not all(i in names for i in batch):
+                for m in self.read(0.05):
+                    if m.get_type() == "PARAM_VALUE" and m.param_index < count and m.param_index not in names:
+                        names[m.param_index] = m.param_id
+                        quiet = time.monotonic() + 0.3
+        assert len(names) == count, f"parameter names: {len(names)} of {count}"
+        return [names[i] for i in range(count)]
 
     def soak(self, seconds: float) -> None:
         """Let the simulation and telemetry run for a while on whatever state the fuzz left."""

@@ -168,3 +168,26 @@ def random_plan(rng: random.Random, mission_type: int, home_e7: tuple[int, int],
         items.append(M.MAVLink_mission_item_int_message(
             1, 1, 0, frame, command, 0, 1, *params[:4], x, y, params[4], mission_type))
     return items
+
+
+# parameters that change who the vehicle or its ground station is: a legitimate effect that would
+# only make the ground station of the test a stranger (its requests then go unanswered by design)
+IDENTITY_PARAMS = frozenset({"SYSID_THISMAV", "MAV_SYSID", "SYSID_MYGCS", "MAV_GCS_SYSID", "SYSID_ENFORCE"})
+PARAM_TYPES = (M.MAV_PARAM_TYPE_UINT8, M.MAV_PARAM_TYPE_INT8, M.MAV_PARAM_TYPE_INT16, M.MAV_PARAM_TYPE_INT32,
+               M.MAV_PARAM_TYPE_REAL32)
+
+
+def param_chunks(names: list[str], target: tuple[int, int], seed: int, copies: int) -> Iterator[Chunk]:
+    """PARAM_SET of every parameter (but the identity ones) with wild values, 20 parameters a chunk."""
+    rng = random.Random(seed)
+    mav = M.MAVLink(None, srcSystem=SOURCE[0], srcComponent=SOURCE[1])
+    names = [n for n in names if n not in IDENTITY_PARAMS]
+    for start in range(0, len(names), 20):
+        frames = []
+        for name in names[start:start + 20]:
+            for _ in range(copies):
+                value = _f32(wild_float(rng))
+                frames.append(bytes(M.MAVLink_param_set_message(*target, name.encode(), value,
+                                                                 rng.choice(PARAM_TYPES)).pack(mav)))
+                mav.seq = (mav.seq + 1) % 256
+        yield Chunk(f"PARAM_SET {names[start]}..{names[min(start + 19, len(names) - 1)]}", tuple(frames))

@@ -13,7 +13,9 @@ read by name answered, HEARTBEATs arriving (at the default interval again), and 
 - on the ground: every command, then every message id;
 - in flight: GUIDED, armed, taking off, then the same again (guided targets, overrides...);
 - plans: random missions, fences and rally points (half with finite extremes only, so some are
-  kept), each accepted mission flown in AUTO.
+  kept), each accepted mission flown in AUTO;
+- parameters: every parameter (from the vehicle's own list) set to wild values in flight, the
+  vehicle flown on what was kept, then the daemon restarted on the persisted values.
 
 Bounded for CI (about 200 commands x 2 encodings x 4 sets, 300 ids x 4 payloads, 12 plans per
 type): GCSD_FUZZ_SEED changes the seed, GCSD_FUZZ_ROUNDS (default 2) multiplies the wild sets,
@@ -30,7 +32,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from .daemon import VEHICLE, FuzzedDaemon
-from .frames import Chunk, command_chunks, message_chunks, random_plan
+from .frames import Chunk, command_chunks, message_chunks, param_chunks, random_plan
 
 SEED = int(os.environ.get("GCSD_FUZZ_SEED", "20261125"))
 ROUNDS = int(os.environ.get("GCSD_FUZZ_ROUNDS", "2"))
@@ -148,3 +150,18 @@ def test_random_plans_uploaded_and_flown_leave_the_daemon_serving(fuzzed, vehicl
                 fail(d, f"{vehicle}: flying random mission {n}")
     assert M.MAV_MISSION_ACCEPTED in results and len(set(results)) > 1, results  # both outcomes exercised
     assert_still_serving(d, vehicle)
+
+
+@pytest.mark.parametrize("vehicle", VEHICLES)
+def test_every_parameter_set_to_wild_values_in_flight_and_after_a_restart_leaves_the_daemon_serving(fuzzed,
+                                                                                                    vehicle):
+    d = fuzzed(vehicle)
+    names = d.param_names()
+    fly(d, vehicle)
+    run_chunks(d, param_chunks(names, VEHICLE, SEED + 3, ROUNDS), f"{vehicle} parameters")
+    fly(d, vehicle)  # the simulation now runs on whatever values were accepted
+    assert_still_serving(d, vehicle)
+    # the values that were kept are persisted: the daemon must start on them (a clean stop first)
+    assert d.restart() == 0, d.log_tail()
+    fly(d, vehicle)
+    assert_still_serving(d, f"{vehicle} after a restart")
