@@ -125,7 +125,7 @@ def _status(args: argparse.Namespace) -> int:
     path = Path(config.state_dir) / control.SOCKET_NAME
     try:
         answers = [(None, control.query(path))]
-    except OSError as exc:
+    except (OSError, ValueError) as exc:  # ValueError: something else answers there, not gcsd's JSON
         local_error = exc
         answers = []
     if not answers:  # started from another directory? ask the registered daemons
@@ -134,11 +134,12 @@ def _status(args: argparse.Namespace) -> int:
                 continue
             try:
                 answers.append((entry, control.query(Path(entry["socket"]))))
-            except OSError:
+            except (OSError, ValueError, KeyError, TypeError):
                 continue
     if not answers:
         which = "" if args.config is None else f" started with {args.config}"
-        print(f"gcsd status: no daemon answers on {path} ({local_error.strerror or local_error}), and no "
+        reason = getattr(local_error, "strerror", None) or local_error
+        print(f"gcsd status: no daemon answers on {path} ({reason}), and no "
               f"daemon{which} is registered in {control.runtime_dir()}", file=sys.stderr)
         return EXIT_FAILURE
     if args.json:

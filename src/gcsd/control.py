@@ -66,7 +66,10 @@ def query(path: Path, timeout_s: float = 3.0) -> dict:
             if not data:
                 break
             chunks.append(data)
-    return json.loads(b"".join(chunks))
+    document = json.loads(b"".join(chunks))
+    if not isinstance(document, dict) or not isinstance(document.get("channels"), list):
+        raise ValueError("the answer is not a gcsd status document")
+    return document
 
 
 # --- registration: how `gcsd status` finds a daemon started elsewhere -------------------------

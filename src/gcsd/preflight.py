@@ -84,6 +84,13 @@ def _state_dir_can_be_made(config: Config) -> list[str]:
 
 
 def _parent_can_be_made(config: Config, key: str, path: Path) -> list[str]:
+    try:
+        return _parent_checks(config, key, path)
+    except OSError as exc:  # stat refused (a directory we may not search)
+        return [f"{config.source.where(key)}: cannot check {_show(path)}: {exc.strerror or exc}"]
+
+
+def _parent_checks(config: Config, key: str, path: Path) -> list[str]:
     if path.is_dir():
         return [f"{config.source.where(key)}: {_show(path)} is a directory"]
     if path.exists() and not os.access(path, os.W_OK):
@@ -96,8 +103,11 @@ def _dir_can_be_made(config: Config, key: str, path: Path) -> list[str]:
     directory (so mkdir will work)."""
     where = config.source.where(key)
     existing = path
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
+    try:
+        while not existing.exists() and existing != existing.parent:
+            existing = existing.parent
+    except OSError as exc:  # stat refused (a directory we may not search)
+        return [f"{where}: cannot create or write {_show(path)}: {exc.strerror or exc}"]
     if not existing.is_dir():
         return [f"{where}: cannot create {_show(path)}: {_show(existing)} is not a directory"]
     if not os.access(existing, os.W_OK | os.X_OK):

@@ -235,3 +235,33 @@ def test_mav_type_names(mav_type, name):
     from gcsd.control import mav_type_name
 
     assert mav_type_name(mav_type) == name
+
+
+@pytest.mark.parametrize("answer", [b"garbage\n", b'["a list"]\n', b'{"version": "9"}\n'])
+def test_status_of_a_socket_that_is_not_gcsd_exits_1_with_one_line(tmp_path, monkeypatch, capsys, answer):
+    import socket
+    import threading
+
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path / "run"))
+    config = tmp_path / "g.yaml"
+    config.write_text(f"state_dir: {tmp_path / 'st'}\n")
+    (tmp_path / "st").mkdir()
+    server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    server.bind(str(tmp_path / "st" / "gcsd.sock"))
+    server.listen(1)
+
+    def answer_once() -> None:
+        conn, _ = server.accept()
+        with conn:
+            conn.sendall(answer)
+
+    thread = threading.Thread(target=answer_once)
+    thread.start()
+    try:
+        assert main(["status", "-c", str(config)]) == 1
+    finally:
+        thread.join(5)
+        server.close()
+    err = capsys.readouterr().err
+    assert err.startswith(f"gcsd status: no daemon answers on {tmp_path / 'st' / 'gcsd.sock'} (")
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
