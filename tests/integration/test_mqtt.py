@@ -228,14 +228,15 @@ def test_companion_bridge_reached_from_the_ground_side_through_the_broker(broker
     try:
         daemon({"state_dir": str(tmp_path / "fc"), "vehicle": {"type": "copter", "sysid": 7},
                 "channels": [{"name": "telem1", "type": "serial", "device": modem.devices[0], "baud": 921600}]})
-        daemon({"state_dir": str(tmp_path / "companion"), "vehicle": {"type": "companion", "sysid": 7},
+        # the companion on its own sysid: it takes TOPIC/down/7 only because it learned the route to 7
+        daemon({"state_dir": str(tmp_path / "companion"), "vehicle": {"type": "companion", "sysid": 70},
                 "channels": [{"name": "fc", "type": "serial", "device": modem.devices[1], "baud": 921600},
                              mqtt_channel(broker, "vehicle", topic)]})
         ground = daemon(ground_side(tmp_path, broker, topic))
         gcs = client(udp_url(ground.port("gcs")))
-        seen = heard_all(gcs, {(7, 1), (7, 191)})
+        seen = heard_all(gcs, {(7, 1), (70, 191)})
         assert seen.get((7, 1)) and seen[(7, 1)][-1].type == M.MAV_TYPE_QUADROTOR, "the flight controller"
-        assert seen.get((7, 191)) and seen[(7, 191)][-1].type == M.MAV_TYPE_ONBOARD_CONTROLLER, "the companion"
+        assert seen.get((70, 191)) and seen[(70, 191)][-1].type == M.MAV_TYPE_ONBOARD_CONTROLLER, "the companion"
 
         assert param_value(gcs, (7, 1), b"SYSID_THISMAV") == 7.0
         mark = gcs.mark()
@@ -249,7 +250,7 @@ def test_companion_bridge_reached_from_the_ground_side_through_the_broker(broker
             time.sleep(0.1)
         assert "RC7_TRIM" in saved.read_text(), "saved by the flight controller"
         # the companion's own component answers for itself on the same path
-        assert param_value(gcs, (7, 191), b"SYSID_THISMAV") == 7.0
+        assert param_value(gcs, (70, 191), b"SYSID_THISMAV") == 70.0
     finally:
         modem.close()
 
