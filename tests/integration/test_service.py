@@ -118,9 +118,14 @@ def test_status_command_shows_channels_routes_and_vehicle(tmp_path):
         while not (tmp_path / "state" / "gcsd.sock").exists() and time.monotonic() < deadline:
             time.sleep(0.05)
         gcs = mavutil.mavlink_connection(udp_url(port), source_system=255, source_component=190)
-        gcs.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-        assert gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=3) is not None
+        heard = None
+        for _ in range(10):  # the control socket exists a moment before the UDP port is bound
+            gcs.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            heard = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5)
+            if heard is not None:
+                break
         gcs.close()
+        assert heard is not None
         out = subprocess.run([sys.executable, "-m", "gcsd", "status", "-c", str(cfg)],
                              capture_output=True, text=True, timeout=10)
         assert out.returncode == 0, out.stderr
