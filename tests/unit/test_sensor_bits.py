@@ -150,3 +150,21 @@ def test_an_armed_copter_on_the_ground_is_standby_and_active_once_flying(tmp_pat
     mark = h.mark()
     h.run(1.5)
     assert h.of_type("HEARTBEAT", mark)[-1].system_status == M.MAV_STATE_ACTIVE
+
+
+def test_prearm_failures_are_shown_unasked_soon_after_they_appear_then_every_30_s(tmp_path):
+    h = Harness(tmp_path)
+    mark = h.mark()
+    h.run(40, step=0.5)
+    assert not [t for t in h.texts(mark) if t.startswith("PreArm")]  # the checks pass: nothing to say
+    h.set_param("RC1_MIN", 1400)
+    mark = h.mark()
+    h.run(6, step=0.5)
+    assert h.texts(mark).count("PreArm: RC1_MIN too high") == 1
+    h.run(30, step=0.5)
+    assert h.texts(mark).count("PreArm: RC1_MIN too high") == 2  # again after ArduPilot's 30 s
+    h.run(25, step=0.5)  # the next display would be due within these 8 s
+    assert h.arm(force=True) == ACCEPTED
+    mark = h.mark()
+    h.run(8, step=0.5)  # (a copter left on the ground disarms itself after DISARM_DELAY, 10 s)
+    assert h.state.armed and not [t for t in h.texts(mark) if t.startswith("PreArm")]  # armed: no display

@@ -25,7 +25,8 @@
   STAT_BOOTCNT + 1, banner). Parameters marked "reboot required" take effect at the next start
   of gcsd. param1 0: nothing; 2 (shutdown) and the debug magics: UNSUPPORTED.
 - RUN_PREARM_CHECKS: each failure as "PreArm: ..." STATUSTEXT; ACCEPTED (TEMPORARILY_REJECTED
-  armed).
+  armed). Unasked, while disarmed, the failures are shown as ArduPilot shows them
+  (`vehicles.prearm.PrearmDisplay`: every 30 s, or 4 s after they change).
 - DO_START_MAG_CAL, DO_ACCEPT_MAG_CAL, DO_CANCEL_MAG_CAL: a simulated onboard compass
   calibration (`magcal`): MAG_CAL_PROGRESS and MAG_CAL_REPORT to every ground station,
   results into COMPASS_OFS*/DIA*/ODI* when accepted, or at once with autosave (param3 1).
@@ -41,6 +42,7 @@ from pathlib import Path
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from ..vehicles.prearm import PrearmDisplay
 from . import Incoming, Service
 from .accelcal import FAILURE, AccelCal, imu_error
 from .commands import CommandRequest
@@ -68,6 +70,7 @@ class MaintenanceService(Service):
         self.accel_requester: tuple | None = None  # ((sysid, compid), channel) of the accel dialogue
         self.mag = MagCal(node.params)
         self.mag_outbox: dict[int, list] = {}  # channel index -> MAG_CAL messages for it
+        self.prearm_display = PrearmDisplay()
 
     def commands(self):
         return {
@@ -327,7 +330,11 @@ class MaintenanceService(Service):
             self._send_asks(self.accel.poll(now))
         for msg in self._mag_cal_messages(channel, now):
             send(msg)
-        deadlines = [d for d in (self.slot.next_deadline(), self.accel.next_deadline(), self.mag.next_deadline())
+        if self.node.vehicle.can_arm:
+            for text in self.prearm_display.poll(now, self.node.state.armed, self.node.prearm_failures):
+                self.node.send_text(M.MAV_SEVERITY_CRITICAL, text)
+        deadlines = [d for d in (self.slot.next_deadline(), self.accel.next_deadline(), self.mag.next_deadline(),
+                                 self.prearm_display.next_deadline() if self.node.vehicle.can_arm else None)
                      if d is not None]
         return min(deadlines) if deadlines else None
 

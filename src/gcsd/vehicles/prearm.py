@@ -177,3 +177,40 @@ def prearm_failures(node) -> list[str]:
     if backend_checks is not None:
         failures += backend_checks()
     return failures
+
+
+class PrearmDisplay:
+    """ArduPilot's AP_Arming::update while disarmed: the checks run once a second, and their
+    failures are shown as "PreArm: ..." STATUSTEXT every DISPLAY_PERIOD_S, or at once (at most every
+    CHANGE_GAP_S) when the set of failures changes; nothing while they pass or while armed. Pure:
+    `poll(now, armed, failures)` returns the texts to send now; `failures` is called only when due."""
+
+    CHECK_INTERVAL_S = 1.0
+    DISPLAY_PERIOD_S = 30.0
+    CHANGE_GAP_S = 4.0
+
+    def __init__(self) -> None:
+        self.next_check_s = 0.0
+        self.last_display_s: float | None = None
+        self.last_failures: list[str] = []
+
+    def poll(self, now: float, armed: bool, failures) -> list[str]:
+        if armed:
+            self.last_failures = []
+            return []
+        if now < self.next_check_s:
+            return []
+        self.next_check_s = now + self.CHECK_INTERVAL_S
+        found = failures()
+        changed = found != self.last_failures
+        self.last_failures = found
+        if not found:
+            return []
+        since = None if self.last_display_s is None else now - self.last_display_s
+        if since is None or since >= self.DISPLAY_PERIOD_S or (changed and since >= self.CHANGE_GAP_S):
+            self.last_display_s = now
+            return [f"PreArm: {text}" for text in found]
+        return []
+
+    def next_deadline(self) -> float:
+        return self.next_check_s
