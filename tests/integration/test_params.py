@@ -338,3 +338,18 @@ def test_a_set_still_waiting_for_its_write_is_flushed_by_a_clean_stop(daemon, cl
     d.stop()
     values, problems = read_parm(tmp_path / "st" / "mav.parm")
     assert problems == [] and values["RC3_TRIM"] == 1502.0
+
+
+def test_a_real32_value_survives_a_restart_bit_exact(daemon, client, tmp_path):
+    conf = {"state_dir": str(tmp_path / "st"), "channels": [udp_channel("gcs")]}
+    value = struct.unpack("<f", struct.pack("<f", 0.35000002))[0]  # "%.7g" wrote 0.35, another float32
+    d = daemon(conf)
+    c = client(udp_url(d.port("gcs")))
+    mark = set_param(c, "COMPASS_OFS_X", value)
+    r = wait_for(c, lambda r: r.type == "PARAM_VALUE" and param_name(r.msg) == "COMPASS_OFS_X", since=mark)
+    assert r is not None and r.msg.param_value == value
+    d.stop()
+    d2 = daemon(conf)
+    c2 = client(udp_url(d2.port("gcs")))
+    back = read_param(c2, "COMPASS_OFS_X").param_value
+    assert struct.pack("<f", back) == struct.pack("<f", value), (back, value)
