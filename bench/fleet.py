@@ -39,6 +39,7 @@ trip; one way is about half).
 from __future__ import annotations
 
 import argparse
+import os
 import select
 import socket
 import statistics
@@ -53,7 +54,7 @@ if __package__ in (None, ""):  # run as a script: python bench/fleet.py
 from pymavlink.dialects.v20 import ardupilotmega as M
 from tests.integration.mosquitto import Mosquitto
 
-from bench.routers import Launched, cpu_seconds, free_udp_port, gcsd_config, start_gcsd
+from bench.routers import Launched, cpu_seconds, free_udp_port, gcsd_config, machine_busy_s, start_gcsd
 
 GROUND_SYSID = 251
 SETTLE_S = 4.0
@@ -62,6 +63,7 @@ CPU_LIMIT_PCT = 90.0
 HB_LOW, HB_HIGH = 0.9, 1.1
 RATE_FRACTION = 0.95
 PROBES = 100
+QUIET_PCT = 25.0
 ALL_OFF = "{raw_sens: 0, ext_stat: 0, rc_chan: 0, raw_ctrl: 0, position: 0, extra1: 0, extra2: 0, extra3: 0, adsb: 0}"
 FLEET_MESSAGES = (M.MAVLINK_MSG_ID_SYS_STATUS, M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT)
 
@@ -94,6 +96,7 @@ class Trial:
     frames: int = 0
     cpu: dict[str, float] = field(default_factory=dict)  # process -> % of one core
     latency_ms: dict[str, tuple[float, float]] = field(default_factory=dict)  # path -> (p50, p99) round trip
+    others_pct: float = 0.0  # CPU used by processes outside the trial during the window, % of one core
     sustained: bool = False
     error: str | None = None
 
@@ -276,6 +279,7 @@ def trial(workdir: Path, profile: str, per_topic: int, topics: int = 1, procs: i
         _pump(stations, SETTLE_S)
         pids = {name: proc.pid for name, proc in launched.items()} | {"mosquitto": broker.pid}
         cpu0 = {name: cpu_seconds(pid) for name, pid in pids.items()}
+        own0, busy0 = cpu_seconds(os.getpid()), machine_busy_s()
         for s in stations:
             s.drain()
             s.reset()
@@ -286,6 +290,8 @@ def trial(workdir: Path, profile: str, per_topic: int, topics: int = 1, procs: i
             _pump(stations, min(1.0, window_s - (time.monotonic() - w0)))
         elapsed = time.monotonic() - w0
         t.cpu = {name: (cpu_seconds(pid) - cpu0[name]) / elapsed * 100.0 for name, pid in pids.items()}
+        own = (cpu_seconds(os.getpid()) - own0) / elapsed * 100.0
+        t.others_pct = max(0.0, (machine_busy_s() - busy0) / elapsed * 100.0 - sum(t.cpu.values()) - own)
         _summarise(t, stations, wanted, elapsed)
         by_path: dict[str, list[float]] = {"broker": [], "direct": []}
         for i in range(PROBES):
@@ -335,6 +341,19 @@ def judge(t: Trial, reference_msgs: float | None) -> None:
     t.sustained = ok
 
 
+def _wait_quiet(threshold_pct: float = QUIET_PCT, max_wait_s: float = 60.0) -> None:
+    """Wait (at most max_wait_s) until the machine's other processes use less than threshold_pct of
+    a core over 2 s, so that a trial does not start under someone else's burst."""
+    end = time.monotonic() + max_wait_s
+    while time.monotonic() < end:
+        b0, t0 = machine_busy_s(), time.monotonic()
+        time.sleep(2.0)
+        busy = (machine_busy_s() - b0) / (time.monotonic() - t0) * 100.0
+        if busy < threshold_pct:
+            return
+        log(f"[fleet]   machine busy ({busy:.0f} % of a core), waiting")
+
+
 @dataclass
 class FleetResult:
     window_s: float
@@ -349,6 +368,7 @@ def measure(workdir: Path, quick: bool = False, env=None, window_s: float | None
             [("fleet", 250, 1), ("fleet", 250, 2)] + [("default", n, 1) for n in (50, 100, 150, 200, 250)])
     reference = None
     for profile, per_topic, topics in plan:
+        _wait_quiet()
         if profile == "default" and res.trials and res.trials[-1].profile == "default" and not res.trials[-1].sustained:
             break  # the previous, smaller default fleet already failed
         log(f"[fleet] {profile} profile: {topics} topic(s) x {per_topic} copters over {2 * topics} vehicle-side "
@@ -362,7 +382,8 @@ def measure(workdir: Path, quick: bool = False, env=None, window_s: float | None
         log(f"[fleet]   heartbeat {t.hb_min:.2f}..{t.hb_max:.2f} Hz, msgs/s per vehicle min {t.msgs_min:.1f} "
             f"median {t.msgs_median:.1f}, lost {t.lost} of {t.frames}, cpu "
             + ", ".join(f"{k} {v:.0f} %" for k, v in t.cpu.items())
-            + f", rtt ms {t.latency_ms}, sustained {t.sustained}" + (f" ({t.error})" if t.error else ""))
+            + f", others {t.others_pct:.0f} %, rtt ms {t.latency_ms}, sustained {t.sustained}"
+            + (f" ({t.error})" if t.error else ""))
         res.trials.append(t)
     return res
 
@@ -371,18 +392,19 @@ def table(res: FleetResult) -> str:
     out = [(f"Fleet: copters over vehicle-side gcsd processes -> Mosquitto -> ground-side gcsd -> UDP ground station "
            f"(bench/fleet.py), {res.window_s:.0f} s windows"), "",
            ("| profile | topics x vehicles | HEARTBEAT Hz min..max | msgs/s per vehicle min / median | lost | "
-           "CPU per vehicle, vehicle side | ground side CPU | mosquitto CPU | RTT p50/p99 broker | direct | sustained |"),
-           "|---|---|---|---|---:|---:|---:|---:|---|---|---|"]
+           "CPU per vehicle, vehicle side | ground side CPU | mosquitto CPU | RTT p50/p99 broker | direct | "
+            "other load | sustained |"),
+           "|---|---|---|---|---:|---:|---:|---:|---|---|---:|---|"]
     for t in res.trials:
         if t.error:
-            out.append(f"| {t.profile} | {t.topics} x {t.vehicles // t.topics} | {t.error} | | | | | | | | no |")
+            out.append(f"| {t.profile} | {t.topics} x {t.vehicles // t.topics} | {t.error} | | | | | | | | | no |")
             continue
         ground = max(v for k, v in t.cpu.items() if k.startswith("ground"))
         b, d = t.latency_ms.get("broker", (0, 0)), t.latency_ms.get("direct", (0, 0))
         out.append(f"| {t.profile} | {t.topics} x {t.vehicles // t.topics} | {t.hb_min:.2f}..{t.hb_max:.2f} | "
                    f"{t.msgs_min:.1f} / {t.msgs_median:.1f} | {t.lost} | {t.vehicle_cpu_per_vehicle:.3f} % | "
                    f"{ground:.1f} % | {t.cpu.get('mosquitto', 0):.1f} % | {b[0]:.2f} / {b[1]:.2f} ms | "
-                   f"{d[0]:.2f} / {d[1]:.2f} ms | {'yes' if t.sustained else 'no'} |")
+                   f"{d[0]:.2f} / {d[1]:.2f} ms | {t.others_pct:.0f} % | {'yes' if t.sustained else 'no'} |")
     out += ["", "Largest sustained fleet: " + ", ".join(f"{p}: {n}" for p, n in res.largest.items())]
     return "\n".join(out)
 
