@@ -5,7 +5,9 @@ against the real daemon over UDP with pymavlink: each result lands in ArduPilot'
   -> MAG_CAL_PROGRESS ... -> MAG_CAL_REPORT per compass -> COMPASS_OFS* read back.
 - Accelerometer: PREFLIGHT_CALIBRATION param5 1 -> ACCELCAL_VEHICLE_POS 1..6 from the vehicle, each
   answered by a COMMAND_ACK (QGC's Next button) -> ACCELCAL_VEHICLE_POS_SUCCESS.
-- Level (param5 2): IN_PROGRESS, then ACCEPTED, AHRS_TRIM_* set.
+- Level (param5 2), simple accelerometer (param5 4), pressure (param3 1): IN_PROGRESS, then ACCEPTED,
+  AHRS_TRIM_* / INS_ACC* / BARO1_GND_PRESS set.
+- Motor test (DO_MOTOR_TEST) and the radio calibration's RCn_ parameters.
 The same dialogues with a float clock, and the other calibrations: tests/unit/test_calibration.py.
 """
 
@@ -118,18 +120,30 @@ def test_accelcal_vehicle_pos_from_the_ground_station_must_match_the_position_as
                     and r.msg.param1 == M.ACCELCAL_VEHICLE_POS_FAILED, 3.0, since=mark)
 
 
-def test_level_calibration_reports_in_progress_then_accepted_and_sets_ahrs_trim(gcs):
-    gcs.send(M.MAVLink_param_set_message(1, 1, b"AHRS_TRIM_X", 0.1, M.MAV_PARAM_TYPE_REAL32))
-    assert wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and r.msg.param_id == "AHRS_TRIM_X", 3.0)
+@pytest.mark.parametrize("name, params, text, param, value", [
+    ("level", (0, 0, 0, 0, 2), "Trim OK", "AHRS_TRIM_X", 0.0),  # the vehicle sits level
+    ("simple accel", (0, 0, 0, 0, 4), "Accelerometer calibration complete", "INS_ACCSCAL_X", 1.0),
+    ("pressure", (0, 0, 1, 0, 0), "Updating barometer calibration", "BARO1_GND_PRESS", None),
+])
+def test_one_shot_calibrations_as_qgroundcontrol_sends_them(gcs, name, params, text, param, value):
+    """QGroundControl's Level Horizon / simple accelerometer / Calibrate Pressure buttons: it waits for
+    COMMAND_ACK IN_PROGRESS then ACCEPTED ("Successfully completed"); the result is a parameter."""
+    before = _param(gcs, param)
+    gcs.send(M.MAVLink_param_set_message(1, 1, param.encode(), before + 0.1, M.MAV_PARAM_TYPE_REAL32))
+    assert wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and r.msg.param_id == param, 3.0)
     mark = gcs.mark()
-    gcs.command_long(M.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 0, 2)  # QGroundControl's "Level Horizon"
+    gcs.command_long(M.MAV_CMD_PREFLIGHT_CALIBRATION, *params)
     first = wait_for(gcs, is_ack(M.MAV_CMD_PREFLIGHT_CALIBRATION), 3.0, since=mark)
     assert first is not None and first.msg.result == M.MAV_RESULT_IN_PROGRESS
     final = wait_for(gcs, lambda r: is_ack(M.MAV_CMD_PREFLIGHT_CALIBRATION)(r)
                      and r.msg.result == M.MAV_RESULT_ACCEPTED, 6.0, since=mark)
     assert final is not None
-    assert wait_for(gcs, lambda r: r.type == "STATUSTEXT" and "Trim OK" in r.msg.text, 3.0, since=mark)
-    assert _param(gcs, "AHRS_TRIM_X") == pytest.approx(0.0)  # the vehicle sits level
+    assert wait_for(gcs, lambda r: r.type == "STATUSTEXT" and text in r.msg.text, 3.0, since=mark)
+    after = _param(gcs, param)
+    if value is None:  # the ground pressure measured now: where it was before the nudge
+        assert after == pytest.approx(before, abs=20.0) and after != pytest.approx(before + 0.1, abs=1e-3)
+    else:
+        assert after == pytest.approx(value)
 
 
 def test_motor_test_as_qgroundcontrols_motors_page_sends_it_spins_one_output_then_stops(gcs):
