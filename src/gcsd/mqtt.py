@@ -20,9 +20,9 @@ The broker is one peer of the channel while connected: the channel's counters co
 and bytes as for any link, a payload that is not whole frames is a parse error, and frames
 from every source go through the router. Also counted as parse errors and dropped unparsed: a
 payload over MAX_PAYLOAD_BYTES, and (role ground) a frame on T/up/S/C whose source is not S, so
-that broker ACLs giving each vehicle only its own up/S topic cannot be bypassed. Frames are published only while connected; a frame
-that finds the connection down or more than MAX_PENDING_FRAMES not yet written to the socket
-is a counted drop, never an unbounded queue.
+that broker ACLs giving each vehicle only its own up/S topic cannot be bypassed. Frames are
+published only while connected; a frame that finds the connection down, or more than
+MAX_PENDING_FRAMES not yet written to the socket, is a counted drop, never an unbounded queue.
 
 States: closed -> connecting (TCP, TLS and CONNECT in a worker thread, as they block) ->
 waiting for CONNACK (CONNACK_TIMEOUT_S) and the SUBACK of the initial subscriptions ->
@@ -167,7 +167,7 @@ class MqttLink:
         self.client = paho.Client(CallbackAPIVersion.VERSION2, client_id=self.client_id, clean_session=True,
                                   protocol=paho.MQTTv311, reconnect_on_failure=False)
         self.client.connect_timeout = CONNECT_TIMEOUT_S
-        self.client.suppress_exceptions = True  # an exception in our callback is logged, not raised into paho
+        self.client.suppress_exceptions = True  # paho contains a callback's exception (ours log their own)
 
     # --- connect ---------------------------------------------------------------------------
     async def open(self) -> tuple[Callable[[], None], asyncio.Future]:
@@ -175,7 +175,8 @@ class MqttLink:
         if cfg.username is not None:
             password = None
             if cfg.password_file is not None:
-                password = Path(cfg.password_file).read_text().rstrip("\r\n")  # OSError: retried
+                lines = Path(cfg.password_file).read_text().splitlines()  # OSError: retried with backoff
+                password = lines[0] if lines else ""
             client.username_pw_set(cfg.username, password)
         if cfg.tls:
             context = ssl.create_default_context(cafile=cfg.ca_file)
