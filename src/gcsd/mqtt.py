@@ -329,7 +329,7 @@ class MqttLink:
         """Role vehicle: a system now sends through this channel, so its down topic is taken."""
         self.served.add(sysid)
         self.client.subscribe(self.topics.down(sysid), 0)
-        log.info("mqtt_serving", channel=self.channel.name, sysid=sysid, topic=self.topics.down(sysid))
+        log.debug("mqtt_serving", channel=self.channel.name, sysid=sysid, topic=self.topics.down(sysid))
 
     # --- close -----------------------------------------------------------------------------
     def close(self) -> None:
