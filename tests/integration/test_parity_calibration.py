@@ -1,7 +1,8 @@
 """The calibration dialogues as QGroundControl's Sensors page drives them (APMSensorsComponentController),
 against the real daemon over UDP with pymavlink: each result lands in ArduPilot's parameter names.
 
-- Compass: DO_CANCEL_MAG_CAL (QGC's probe for onboard calibration) -> DO_START_MAG_CAL(mask, 0, autosave 1)
+- Compass: DO_CANCEL_MAG_CAL (QGC's probe for onboard calibration) -> COMPASS_CAL_FIT 100 ->
+  DO_START_MAG_CAL(mask, 0, autosave 1)
   -> MAG_CAL_PROGRESS ... -> MAG_CAL_REPORT per compass -> COMPASS_OFS* read back.
 - Accelerometer: PREFLIGHT_CALIBRATION param5 1 -> ACCELCAL_VEHICLE_POS 1..6 from the vehicle, each
   answered by a COMMAND_ACK (QGC's Next button) -> ACCELCAL_VEHICLE_POS_SUCCESS.
@@ -59,10 +60,24 @@ def test_compass_calibration_as_qgroundcontrol_runs_it_saves_offsets_and_the_dae
     before = _param(gcs, "COMPASS_OFS_X")
     assert before is not None
     assert _ack(gcs, M.MAV_CMD_DO_CANCEL_MAG_CAL) == M.MAV_RESULT_ACCEPTED  # "onboard cal supported"
+    fitness = _param(gcs, "COMPASS_CAL_FIT")
+    # QGroundControl raises COMPASS_CAL_FIT to 100 for the calibration (and restores it afterwards).
+    # ArduPilot takes any value; gcsd refuses it beyond the documented range 4..32 and answers with
+    # the value it keeps (a difference owned by the parameter store, see the final report).
     mark = gcs.mark()
-    assert _ack(gcs, M.MAV_CMD_DO_START_MAG_CAL, 0, 0, 1, 0, 0) == M.MAV_RESULT_ACCEPTED
+    gcs.send(M.MAVLink_param_set_message(1, 1, b"COMPASS_CAL_FIT", 100.0, M.MAV_PARAM_TYPE_REAL32))
+    assert wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and r.msg.param_id == "COMPASS_CAL_FIT", 3.0, since=mark)
+    mark = gcs.mark()
+    # QGC's mask: a bit for each compass with COMPASS_DEV_IDn > 0 and COMPASS_USEn set
+    mask = sum(1 << i for i, n in enumerate(("", "2", "3"))
+               if _param(gcs, f"COMPASS_DEV_ID{n}") > 0 and _param(gcs, f"COMPASS_USE{n}"))
+    assert mask == 0b111  # ArduPilot SITL's three compasses
+    assert _ack(gcs, M.MAV_CMD_DO_START_MAG_CAL, mask, 0, 1, 0, 0) == M.MAV_RESULT_ACCEPTED
     report = wait_for(gcs, lambda r: r.type == "MAG_CAL_REPORT", 10.0, since=mark)
     assert report is not None, "no MAG_CAL_REPORT"
+    # QGC finishes only when every compass of its mask has reported
+    assert wait_for(gcs, lambda r: r.type == "MAG_CAL_REPORT" and r.msg.compass_id == 2, 3.0, since=mark)
+    assert {r.msg.compass_id for r in gcs.since(mark, "MAG_CAL_REPORT")} == {0, 1, 2}
     progress = gcs.since(mark, "MAG_CAL_PROGRESS")
     assert progress, "no MAG_CAL_PROGRESS before the report"
     pcts = [r.msg.completion_pct for r in progress if r.msg.compass_id == 0]
@@ -75,6 +90,7 @@ def test_compass_calibration_as_qgroundcontrol_runs_it_saves_offsets_and_the_dae
     saved = [_param(gcs, f"COMPASS_OFS_{a}") for a in "XYZ"]
     assert saved == pytest.approx([rep.ofs_x, rep.ofs_y, rep.ofs_z])
     assert (rep.diag_x, rep.diag_y, rep.diag_z) != (0.0, 0.0, 0.0)
+    gcs.send(M.MAVLink_param_set_message(1, 1, b"COMPASS_CAL_FIT", fitness, M.MAV_PARAM_TYPE_REAL32))
     # the other ground station saw it too (ArduPilot sends them to every GCS link)
     seen = wait_for(other, lambda r: r.type == "MAG_CAL_REPORT" and r.msg.compass_id == rep.compass_id, 3.0)
     assert seen is not None and other.since(0, "MAG_CAL_PROGRESS")
