@@ -3,8 +3,8 @@
 Pure functions of parameters and simulated time. Wind: SIM_WIND_SPD (m/s) from SIM_WIND_DIR
 (degrees, where it blows from, as a weather report says), with SIM_WIND_TURB (m/s) of slow,
 deterministic gusts. GPS: SIM_GPS_DISABLE (1: no fix), SIM_GPS_NUMSATS, SIM_GPS_HDOP with a
-small wander. Battery: current follows throttle (`Limits.cruise_current_a` at cruise throttle),
-consumption integrates it.
+small wander. Battery: current follows throttle (`Limits.cruise_current_a` at cruise throttle,
+at most MAX_CURRENT_A however odd the parameters), consumption integrates it.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from .state import VehicleState
 
 GPS_FIX_NONE = 1
 GPS_FIX_3D = 3
+MAX_CURRENT_A = 200.0  # whatever the parameters say (a hover throttle of 0.01...), a battery's current stays real
 
 
 @dataclass(frozen=True)
@@ -51,8 +52,8 @@ def apply_gps(s: VehicleState, env: Environment) -> None:
 
 def apply_battery(s: VehicleState, lim: Limits, dt: float) -> None:
     if s.armed:
-        load = s.throttle_pct / 100.0 / max(lim.hover_throttle, 0.05)
-        s.current_a = lim.idle_current_a + lim.cruise_current_a * load ** 1.5
+        load = max(0.0, s.throttle_pct / 100.0) / max(lim.hover_throttle, 0.05)
+        s.current_a = min(MAX_CURRENT_A, lim.idle_current_a + lim.cruise_current_a * load ** 1.5)
     else:
         s.current_a = lim.idle_current_a
     s.consumed_mah = min(max(s.capacity_mah, 0.0), s.consumed_mah + s.current_a * dt * 1000.0 / 3600.0)

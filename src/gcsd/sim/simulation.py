@@ -22,8 +22,11 @@ class Dynamics(Protocol):
     def step(self, s: VehicleState, sp: Setpoint, lim: Limits, dt: float) -> None: ...
 
 
+CALM = Environment()  # no wind, good GPS (frozen: one shared default)
+
+
 class SimulatedVehicle:
-    def __init__(self, dynamics: Dynamics, environment: Environment = Environment()) -> None:
+    def __init__(self, dynamics: Dynamics, environment: Environment = CALM) -> None:
         self.dynamics = dynamics
         self.environment = environment
 

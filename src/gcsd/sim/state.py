@@ -111,7 +111,7 @@ class VehicleState:
     def battery_voltage_v(self) -> float:
         frac = self.battery_remaining_pct / 100.0
         sag = 0.02 * self.current_a
-        return BATTERY_CELLS * (CELL_EMPTY_V + (CELL_FULL_V - CELL_EMPTY_V) * frac) - sag
+        return max(0.0, BATTERY_CELLS * (CELL_EMPTY_V + (CELL_FULL_V - CELL_EMPTY_V) * frac) - sag)  # never below 0 V
 
 
 class Kind(enum.Enum):
