@@ -395,7 +395,8 @@ class Runner:
             ("start to first HEARTBEAT, worst (s)", only_gcsd(starts[-1] if starts else None), None, "<= 1",
              lambda v: v["gcsd"] <= 1.0),
         ]
-        shown = {name: label for name, label in ROUTERS.items() if name in self.a.routers or name == "gcsd"}
+        shown = {name: label for name, label in ROUTERS.items()
+                 if name == "gcsd" or routed[name].get("throughput") or routed[name].get("latency")}
         out = routers_table(shown, rows).splitlines()
 
         mc = self.res["machine"]
