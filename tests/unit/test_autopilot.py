@@ -106,6 +106,17 @@ def test_loiter_turns_circles_the_point_the_given_number_of_times(tmp_path):
     assert circling[len(circling) // 2] == pytest.approx(8.0, abs=1.0)  # the median radius
 
 
+def test_a_huge_loiter_radius_is_flown_as_the_largest_arducopter_stores(tmp_path):
+    # finite but absurd (1e30 m): the orbit is ArduPilot's 2550 m at most, never a point off the planet
+    h = flying(tmp_path)
+    plan(h, wp(h, 0, 0, command=M.MAV_CMD_NAV_LOITER_TURNS, param1=1, param3=1e30))
+    h.mode("AUTO")
+    h.run(20)
+    target = h.state.target
+    assert target is not None
+    assert distance_m(target[0], target[1], h.state.home_lat, h.state.home_lon) <= 2550 * 1.01
+
+
 def test_rtl_goes_to_the_nearest_rally_point_and_lands_there(tmp_path):
     h = flying(tmp_path)
     lat, lon = offset(h.state.home_lat, h.state.home_lon, 40, 0)
