@@ -172,5 +172,4 @@ def test_garbage_does_not_keep_new_nodes_from_being_routed(daemon, client):
     cam.heartbeat(M.MAV_TYPE_CAMERA)
     assert wait_for(cam, from_vehicle, others=[gcs, noisy])
     raw = gcs.command_long(M.MAV_CMD_IMAGE_START_CAPTURE, target=(1, 100))
-    pump([noisy, gcs, cam], 0.5)
-    assert [r for r in cam.received if r.raw == raw], "the command for the camera never reached it"
+    assert wait_for(cam, lambda r: r.raw == raw, others=[noisy, gcs]), "the command for the camera never reached it"
