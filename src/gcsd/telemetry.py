@@ -26,7 +26,7 @@ Producer = Callable[["VehicleNode", "Channel", float], MAVLink_message | None]
 
 
 def _e7(deg: float) -> int:
-    return int(round(deg * 1e7))
+    return round(deg * 1e7)
 
 
 def heartbeat(node, channel, now):
