@@ -174,6 +174,32 @@ def test_full_table_keeps_live_routes():
     assert all(table.has(s, 1, 0) for s in range(1, 21))
 
 
+def test_router_forwards_to_a_node_learned_when_a_silent_route_was_replaced():
+    """The table full of 20 routes (SEEN's 4 + 16 on channel 3): a 21st node on channel 1 is not
+    learned while all are fresh, so frames for it are dropped; once the GCS on channel 1 has been
+    silent 30 s the newcomer takes its place and frames for it go to channel 1."""
+    router = make_router()
+    for i in range(16):
+        router.decide(3, HB, 100 + i, 1, -1, -1, now=0.0, active_channels={0, 1, 2, 3})
+    assert len(router.table) == 20
+    channels = {0, 1, 2, 3}
+
+    def keep_talking(now: float) -> None:  # everyone but GCS2 on channel 1
+        for ch, (s, c) in {0: GCS1, 2: CAM, 3: OTHER}.items():
+            router.decide(ch, HB, s, c, -1, -1, now=now, active_channels=channels)
+        for i in range(16):
+            router.decide(3, HB, 100 + i, 1, -1, -1, now=now, active_channels=channels)
+
+    keep_talking(20.0)
+    router.decide(1, HB, 42, 1, -1, -1, now=20.0, active_channels=channels)
+    assert router.decide(0, CMD, *GCS1, 42, 1, now=20.0, active_channels=channels) == Decision(False, ())
+    assert router.decide(0, CMD, *GCS1, 254, 190, now=20.0, active_channels=channels) == Decision(False, (1,))
+    keep_talking(30.5)
+    router.decide(1, HB, 42, 1, -1, -1, now=30.5, active_channels=channels)
+    assert router.decide(0, CMD, *GCS1, 42, 1, now=30.5, active_channels=channels) == Decision(False, (1,))
+    assert not router.table.has(*GCS2, 1), "the silent ground station's route was the one replaced"
+
+
 def test_route_remembers_mavtype_from_first_heartbeat():
     table = RouteTable()
     table.learn(5, 1, 0, now=0.0)
