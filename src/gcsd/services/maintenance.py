@@ -249,6 +249,9 @@ class MaintenanceService(Service):
         if self.node.state.armed:
             return FAILED
         self.node.send_text(M.MAV_SEVERITY_INFO, "Rebooting")
+        self.mag.cancel()  # a reboot ends whatever calibration was running, unsaved
+        self.accel.cancel()
+        self.prearm_display = PrearmDisplay()
         self.node.sim.reboot()
         store = self.node.params
         store.set("STAT_BOOTCNT", store.get("STAT_BOOTCNT") + 1, force=True)
