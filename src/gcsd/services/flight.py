@@ -11,7 +11,8 @@ with that tag). The vehicle type adds
 its own (takeoff, motor test...). A command the autopilot cannot do now gets FAILED.
 
 Messages: SET_POSITION_TARGET_GLOBAL_INT and SET_POSITION_TARGET_LOCAL_NED (positions or
-velocities by type_mask, in GUIDED only); RC_CHANNELS_OVERRIDE and MANUAL_CONTROL only from
+velocities by type_mask, in GUIDED only; a target in a frame it does not take, or with a NaN or
+infinite value in a field its type_mask uses, is dropped whole and the old target kept); RC_CHANNELS_OVERRIDE and MANUAL_CONTROL only from
 the GCS sysid (SYSID_MYGCS), as ArduPilot; GLOBAL_POSITION_INT from other systems feeds an
 antenna tracker's target.
 """
@@ -23,6 +24,7 @@ import math
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import Behaviour
+from ..mission.items import GLOBAL_FRAMES
 from ..sim.geo import offset
 from ..vehicles.rc import mapped_channel
 from . import Incoming, Service
@@ -41,6 +43,8 @@ YAW_RATE_IGNORED = 2048
 RC_IGNORE = 65535
 # SET_POSITION_TARGET_* fields in type_mask bit order (bit n set: field n ignored); bit 9 is a flag
 LOCAL_FIELDS = ("x", "y", "z", "vx", "vy", "vz", "afx", "afy", "afz")
+LOCAL_TARGET_FRAMES = frozenset({M.MAV_FRAME_LOCAL_NED, M.MAV_FRAME_LOCAL_OFFSET_NED, M.MAV_FRAME_BODY_NED,
+                                 M.MAV_FRAME_BODY_OFFSET_NED, M.MAV_FRAME_BODY_FRD})
 GLOBAL_FIELDS = ("lat_int", "lon_int", "alt", "vx", "vy", "vz", "afx", "afy", "afz")
 
 
@@ -198,8 +202,8 @@ class FlightService(Service):
 
     def handle_SET_POSITION_TARGET_GLOBAL_INT(self, inc: Incoming) -> None:
         m = inc.msg
-        if not self._for_us(inc) or not _target_ok(m, GLOBAL_FIELDS):
-            return
+        if not self._for_us(inc) or m.coordinate_frame not in GLOBAL_FRAMES or not _target_ok(m, GLOBAL_FIELDS):
+            return  # ArduPilot ignores a frame it does not know
         yaw = None if m.type_mask & YAW_IGNORED else math.degrees(m.yaw)
         if m.type_mask & POSITION_IGNORED != POSITION_IGNORED:
             self.ap.goto(m.lat_int / 1e7, m.lon_int / 1e7, self._alt(m.alt, m.coordinate_frame), yaw_deg=yaw)
@@ -208,7 +212,7 @@ class FlightService(Service):
 
     def handle_SET_POSITION_TARGET_LOCAL_NED(self, inc: Incoming) -> None:
         m = inc.msg
-        if not self._for_us(inc) or not _target_ok(m, LOCAL_FIELDS):
+        if not self._for_us(inc) or m.coordinate_frame not in LOCAL_TARGET_FRAMES or not _target_ok(m, LOCAL_FIELDS):
             return
         s = self.node.state
         yaw = None if m.type_mask & YAW_IGNORED else math.degrees(m.yaw)
