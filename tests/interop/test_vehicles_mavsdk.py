@@ -127,9 +127,14 @@ async def test_mavsdk_mission_raw_uploads_ten_waypoints_that_are_flown_to_the_en
             end = await telemetry.position()
             assert distance_m(end.latitude_deg, end.longitude_deg, home.latitude_deg, home.longitude_deg) < 1.0
         elif vehicle == "plane":  # back home, circling at RTL_ALTITUDE (100 m)
-            assert distance_m(end.latitude_deg, end.longitude_deg, home.latitude_deg, home.longitude_deg) < 150.0
+            end = await until(telemetry.position, lambda p: distance_m(
+                p.latitude_deg, p.longitude_deg, home.latitude_deg, home.longitude_deg) < 150.0, 60.0,
+                "the plane back home")
             assert end.relative_altitude_m > 35.0
             assert await telemetry.in_air() is True
-        else:  # the rover stopped at the last waypoint
+        else:  # the rover stopped at the last waypoint (at ArduRover's WP_SPEED 5 m/s it brakes for ~12 m)
+            await until(telemetry.velocity_ned, lambda v: math.hypot(v.north_m_s, v.east_m_s) < 0.2, 30.0,
+                        "the rover stopped")
+            end = await telemetry.position()
             last = plan[-1]
             assert distance_m(end.latitude_deg, end.longitude_deg, last.x / 1e7, last.y / 1e7) < 3.0
