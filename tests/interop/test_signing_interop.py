@@ -41,15 +41,15 @@ import pytest
 pytest.importorskip("MAVProxy", reason="MAVProxy is a test extra: pip install -e .[test]")
 pytest.importorskip("mavsdk.asyncio", reason="mavsdk is a test extra: pip install -e .[test]")
 
-from pymavlink import mavutil  # noqa: E402
-from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
+from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
+from mavsdk.asyncio.plugins.action import ActionAsync, ActionError
+from mavsdk.asyncio.plugins.telemetry import FixType, TelemetryAsync
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as M
 
-from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
-from mavsdk.asyncio.plugins.action import ActionAsync, ActionError  # noqa: E402
-from mavsdk.asyncio.plugins.telemetry import FixType, TelemetryAsync  # noqa: E402
-
-from .conftest import REPO_ROOT  # noqa: E402
-from .conftest import mavproxy_script as _mavproxy_script, expect_line as _expect  # noqa: E402
+from .conftest import REPO_ROOT
+from .conftest import expect_line as _expect
+from .conftest import mavproxy_script as _mavproxy_script
 
 pytestmark = pytest.mark.interop
 
@@ -228,17 +228,14 @@ def test_mavproxy_sets_up_signing_on_a_trusted_link_then_only_key_holders_are_ob
         after = _status(daemon)
     finally:
         keyless.close()
-    assert keyless.from_vehicle("HEARTBEAT"), (
-        f"the keyless client heard no vehicle HEARTBEAT (signed output is readable without the key)\n"
-        f"{daemon.describe()}"
-    )
-    assert not any(m.base_mode & MAV_MODE_FLAG_SAFETY_ARMED for m in keyless.from_vehicle("HEARTBEAT"))
+    # No amplification (SPEC "Channels"): a source of rejected frames is never served, not even
+    # the signed telemetry or a STATUSTEXT; the rejections are explained by `gcsd status` (below)
+    # and by a STATUSTEXT to the stations the channel does serve.
+    assert keyless.from_vehicle("HEARTBEAT") == [], keyless.from_vehicle("HEARTBEAT")
     assert not keyless.from_vehicle("COMMAND_ACK"), keyless.from_vehicle("COMMAND_ACK")
     assert not keyless.from_vehicle("PARAM_VALUE"), keyless.from_vehicle("PARAM_VALUE")
-    texts = [m.text for m in keyless.from_vehicle("STATUSTEXT")]
-    assert any("rejected" in t and "unsigned" in t for t in texts), (
-        f"no STATUSTEXT explained the rejection; got {texts}"
-    )
+    assert not keyless.from_vehicle("STATUSTEXT"), keyless.from_vehicle("STATUSTEXT")
+    assert after["trusted"]["packets_out"] > before["trusted"]["packets_out"], "the trusted link was served meanwhile"
     rejected = (after["gcs"]["signature_reject_reasons"].get("unsigned", 0)
                 - before["gcs"]["signature_reject_reasons"].get("unsigned", 0))
     assert rejected == sent, f"{sent} unsigned packets sent, {rejected} counted as rejected: {after['gcs']}"
@@ -312,35 +309,21 @@ async def _first(stream, accept, timeout_s: float, what: str):
 async def test_mavsdk_is_refused_on_a_signed_channel_and_arms_on_an_unsigned_ok_one(gcsd_daemon):
     daemon = gcsd_daemon({"signing": {"key": KEY.hex(), "require": True}, "channels": _channels()})
 
-    # On the signed channel: MAVSDK reads gcsd (signatures are not checked without a key) ...
+    # On the signed channel MAVSDK has no key: everything it sends is rejected, so it is never
+    # served (no amplification, SPEC "Channels") and finds no autopilot; gcsd counts each reject.
+    before = await asyncio.to_thread(_status, daemon)
     mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
     try:
         await mavsdk.add_any_connection(f"udpout://127.0.0.1:{daemon.port('gcs')}")
         system = await mavsdk.first_autopilot(timeout_s=DISCOVERY_WAIT_S)
-        assert system is not None, (
-            f"MAVSDK did not discover the autopilot on the signed channel within {DISCOVERY_WAIT_S} s "
-            f"(gcsd's signed output should be readable without the key)\n{daemon.describe()}"
-        )
-        telemetry, action = TelemetryAsync(system), ActionAsync(system)
-        try:
-            before = await asyncio.to_thread(_status, daemon)
-            started = time.monotonic()
-            # ... but nothing it sends is accepted: no COMMAND_ACK, so MAVSDK times out.
-            with pytest.raises(ActionError) as refused:
-                await action.arm()
-            waited = time.monotonic() - started
-            print(f"MAVSDK arm on the signed channel: {refused.value} after {waited:.2f} s")
-            assert "TIMEOUT" in str(refused.value).upper(), refused.value
-            assert not await telemetry.armed()
-        finally:
-            telemetry.destroy()
-            action.destroy()
+        assert system is None, f"a keyless MAVSDK was served on the signed channel\n{daemon.describe()}"
     finally:
         mavsdk.destroy()
     after = await asyncio.to_thread(_status, daemon)
     rejected = (after["gcs"]["signature_reject_reasons"].get("unsigned", 0)
                 - before["gcs"]["signature_reject_reasons"].get("unsigned", 0))
-    assert rejected >= 1, f"MAVSDK's packets were not counted as unsigned rejects: {after['gcs']}"
+    assert rejected >= 3, f"MAVSDK's heartbeats were not counted as unsigned rejects: {after['gcs']}"
+    assert after["gcs"]["peers"] == 0 and after["gcs"]["packets_out"] == before["gcs"]["packets_out"]
 
     # On the unsigned_ok channel it works.
     mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
