@@ -77,7 +77,8 @@ class MissionClient:
                 self.c.send(last)
                 continue
             if r.type == "MISSION_ACK":
-                return r.msg.type
+                self._next(mark, ("MISSION_ACK",), mission_type, 0.05)  # gcsd sends the final ACK twice:
+                return r.msg.type  # read the copy now, so that the next exchange does not take it
             seq = r.msg.seq
             highest = max(highest, seq)
             it = items[seq]
@@ -103,8 +104,10 @@ class MissionClient:
                 raise AssertionError(f"no MISSION_COUNT in {self.deadline_s} s")
             self.c.send(M.MAVLink_mission_request_list_message(ts, tc, mission_type))
             r, mark = self._next(mark, ("MISSION_COUNT", "MISSION_ACK"), mission_type, self.timeout_s)
-            if r is not None and r.type == "MISSION_ACK":
+            if r is not None and r.type == "MISSION_ACK" and r.msg.type != M.MAV_MISSION_ACCEPTED:
                 raise AssertionError(f"download refused with MISSION_ACK {r.msg.type}")
+            if r is not None and r.type == "MISSION_ACK":
+                continue  # a late copy of an upload's final ACK: not an answer to this request
             if r is not None:
                 count = r.msg.count
         got: dict[int, MissionItem] = {}
