@@ -221,6 +221,20 @@ class GCS:
             await self._serve_tasks(stop)
         except* ChannelStartError as group:
             raise group.exceptions[0] from None
+        finally:  # whatever ended the serving, what was changed is written out
+            self._flush()
+
+    def _flush(self) -> None:
+        for node in self.nodes:
+            try:
+                node.close()
+            except Exception:
+                log.exception("flush_failed", sysid=node.sysid)
+        if self.signing.key is not None:
+            try:
+                self.signing_manager.save(clean=True)
+            except OSError as exc:
+                log.error("signing_save_failed", error=str(exc))
 
     async def _serve_tasks(self, stop: asyncio.Event) -> None:
         async with asyncio.TaskGroup() as tg:
@@ -239,10 +253,6 @@ class GCS:
             await asyncio.sleep(0.05)  # let stream transports write them
             for task in tasks:
                 task.cancel()
-        for node in self.nodes:
-            node.close()
-        if self.signing.key is not None:
-            self.signing_manager.save(clean=True)
 
     async def _simulate(self) -> None:
         """Every node's autopilot and simulation, links or no links (failsafes need it most when
