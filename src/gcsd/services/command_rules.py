@@ -111,7 +111,8 @@ RULES: dict[int, Rule] = {
     M.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN: rule("1", nan_ok="1"),
     M.MAV_CMD_RUN_PREARM_CHECKS: NOTHING,
     M.MAV_CMD_DO_START_MAG_CAL: rule("12345", nan_ok="12345"),
-    M.MAV_CMD_DO_ACCEPT_MAG_CAL: NOTHING,
+    M.MAV_CMD_DO_ACCEPT_MAG_CAL: rule("1"),  # param1: the compass mask (MAVProxy accepts one at a time)
+    M.MAV_CMD_ACCELCAL_VEHICLE_POS: rule("1"),
     M.MAV_CMD_DO_CANCEL_MAG_CAL: NOTHING,
     M.MAV_CMD_FIXED_MAG_CAL_YAW: rule("1"),
     # message rates (services/rates.py), missions, high latency
@@ -121,6 +122,39 @@ RULES: dict[int, Rule] = {
     M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: rule("1"),
     M.MAV_CMD_DO_SET_MISSION_CURRENT: rule("12"),
     M.MAV_CMD_CONTROL_HIGH_LATENCY: rule("1"),
+    # payload commands (services/peripherals.py): what ArduPilot's libraries read
+    M.MAV_CMD_DO_GRIPPER: rule("12"),
+    M.MAV_CMD_DO_PARACHUTE: rule("1"),
+    M.MAV_CMD_AIRFRAME_CONFIGURATION: rule("12"),
+    M.MAV_CMD_DO_SET_SAFETY_SWITCH_STATE: rule("1"),
+    M.MAV_CMD_BATTERY_RESET: rule("12"),
+    getattr(M, "MAV_CMD_EXTERNAL_WIND_ESTIMATE", 43004): rule("1234"),
+    M.MAV_CMD_SET_EKF_SOURCE_SET: rule("1"),
+    M.MAV_CMD_DO_FOLLOW: rule("1"),
+    M.MAV_CMD_DO_SET_ROI_SYSID: rule("1"),
+    M.MAV_CMD_CAN_FORWARD: rule("1"),
+    M.MAV_CMD_DEBUG_TRAP: rule("4"),
+    M.MAV_CMD_DO_AUX_FUNCTION: rule("12"),
+    M.MAV_CMD_SCRIPTING: rule("1"),
+    **{cmd: NOTHING for cmd in (
+        M.MAV_CMD_DO_DIGICAM_CONFIGURE, M.MAV_CMD_DO_DIGICAM_CONTROL, M.MAV_CMD_DO_SET_CAM_TRIGG_DIST,
+        M.MAV_CMD_IMAGE_START_CAPTURE, M.MAV_CMD_IMAGE_STOP_CAPTURE, M.MAV_CMD_VIDEO_START_CAPTURE,
+        M.MAV_CMD_VIDEO_STOP_CAPTURE, M.MAV_CMD_SET_CAMERA_FOCUS, M.MAV_CMD_SET_CAMERA_SOURCE,
+        M.MAV_CMD_DO_MOUNT_CONFIGURE, M.MAV_CMD_DO_MOUNT_CONTROL, M.MAV_CMD_DO_GIMBAL_MANAGER_CONFIGURE,
+        M.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW, M.MAV_CMD_DO_ADSB_OUT_IDENT, M.MAV_CMD_START_RX_PAIR,
+        M.MAV_CMD_DO_RETURN_PATH_START, M.MAV_CMD_NAV_VTOL_LAND, M.MAV_CMD_DO_ENGINE_CONTROL,
+        M.MAV_CMD_DO_VTOL_TRANSITION, M.MAV_CMD_DO_GO_AROUND, M.MAV_CMD_GUIDED_CHANGE_HEADING, M.MAV_CMD_DO_WINCH,
+    )},  # answered without reading a value (no such device, or the command's own checks)
+    # per vehicle type (vehicles/commands.py)
+    M.MAV_CMD_NAV_VTOL_TAKEOFF: rule("7", limits=ALT),
+    M.MAV_CMD_SOLO_BTN_FLY_CLICK: NOTHING,
+    M.MAV_CMD_SOLO_BTN_FLY_HOLD: rule("1"),
+    M.MAV_CMD_SOLO_BTN_PAUSE_CLICK: NOTHING,
+    M.MAV_CMD_DO_SPRAYER: rule("1"),
+    M.MAV_CMD_DO_AUTOTUNE_ENABLE: rule("1"),
+    M.MAV_CMD_GUIDED_CHANGE_SPEED: rule("2"),
+    M.MAV_CMD_GUIDED_CHANGE_ALTITUDE: rule("3", limits={3: LOCATION_ALT_MAX_M}),
+    M.MAV_CMD_SET_HAGL: rule("123"),
 }
 
 
