@@ -4,7 +4,8 @@ one vehicle's cost.
     python -m bench                      # everything (about 5 minutes on an idle machine)
     python -m bench --quick              # smoke run (about 1 minute)
     python -m bench throughput latency   # just these; also: harness, vehicle, params, param_flood, mission,
-                                         # signing, swarm, ftp, fleet (the MQTT fleet, bench/fleet.py)
+                                         # signing, swarm, ftp, fleet (the MQTT fleet, bench/fleet.py),
+                                         # lossy (mission upload time vs loss, bench/lossy.py)
     python -m bench --routers mavproxy   # only some routers (default gcsd,mavlink-router,mavproxy)
 
 mavlink-router is the binary in $GCSD_MAVLINK_ROUTER (or mavlink-routerd on PATH); without it the
@@ -34,6 +35,7 @@ if __package__ in (None, ""):  # run as a script: python bench/run.py
 
 from bench import fleet as bench_fleet  # noqa: E402
 from bench import ftp as bench_ftp  # noqa: E402
+from bench import lossy as bench_lossy  # noqa: E402
 from bench import measure  # noqa: E402
 from bench import mission as bench_mission  # noqa: E402
 from bench import param_flood as bench_param_flood  # noqa: E402
@@ -59,7 +61,7 @@ from bench.routers import (  # noqa: E402
 )
 
 WHAT = ("harness", "throughput", "latency", "vehicle", "params", "param_flood", "mission", "signing", "swarm",
-        "ftp", "fleet")
+        "ftp", "fleet", "lossy")
 ROUTERS = {"gcsd": "gcsd", "mavlink-router": "mavlink-router", "mavproxy": "MAVProxy"}  # name -> column
 LATENCY_RATE = 1000
 
@@ -267,6 +269,8 @@ class Runner:
             self.res["ftp"] = bench_ftp.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
         if "fleet" in a.what:  # bench/fleet.py: vehicle-side processes -> Mosquitto -> ground side
             self.res["fleet"] = bench_fleet.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
+        if "lossy" in a.what:  # bench/lossy.py: upload time vs loss, adaptive re-requests vs a fixed 1 s
+            self.res["lossy"] = bench_lossy.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
 
     def harness(self) -> None:
         a = self.a
@@ -460,6 +464,8 @@ class Runner:
                     "", bench_ftp.table(self.res["ftp"])]
         if self.res.get("fleet"):
             out += ["", bench_fleet.table(self.res["fleet"])]
+        if self.res.get("lossy"):
+            out += ["", bench_lossy.table(self.res["lossy"])]
         return "\n".join(out)
 
 
