@@ -131,3 +131,14 @@ def test_one_shot_calibration_lands_in_arduPilots_parameter(tmp_path, params, na
     assert acks[-1] == ACCEPTED
     assert h.node.params.get(name) == pytest.approx(expected, abs=50.0 if name == "BARO1_GND_PRESS" else 1e-6)
     assert any(text in t for t in h.texts(mark))
+
+
+def test_radio_trim_on_a_plane_takes_the_current_sticks_and_a_copter_has_none(tmp_path):
+    plane = Harness(tmp_path / "p", vehicle="plane")
+    rc4 = plane.node.params.get("RC4_TRIM")
+    plane.send(M.MAVLink_rc_channels_override_message(plane.node.sysid, 1, 1550, 1450, *[65535] * 6))
+    assert plane.command(M.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 1) == ACCEPTED  # ArduPlane's trim_radio
+    p = plane.node.params.get
+    assert (p("RC1_TRIM"), p("RC2_TRIM"), p("RC4_TRIM")) == (1550, 1450, rc4)  # yaw had no input
+    copter = Harness(tmp_path / "c")
+    assert copter.command(M.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 1) == M.MAV_RESULT_UNSUPPORTED

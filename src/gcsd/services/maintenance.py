@@ -13,8 +13,11 @@
     SIM_GYRn_BIAS_*), BARO1_GND_PRESS (the simulated pressure at the current altitude),
     AHRS_TRIM_X/Y (the vehicle's attitude now), INS_ACCOFFS_* / INS_ACCSCAL_* (the simulated
     IMU's offsets, `accelcal.imu_error`; scales 1, trim 0).
-  - compass-motor (param6 1), RC (param4 1), temperature (param1 3) and ground pressure
-    (param2 1) need hardware that a simulation does not have: UNSUPPORTED.
+  - param4 1 alone: a plane's or rover's trim_radio (VehicleType.radio_trim_sticks): the roll,
+    pitch and yaw (steering) RCn_TRIM take the current RC input; ACCEPTED at once. A copter has
+    no such calibration (UNSUPPORTED, as ArduCopter).
+  - compass-motor (param6 1), temperature (param1 3) and ground pressure (param2 1) need
+    hardware that a simulation does not have: UNSUPPORTED.
 - ACCELCAL_VEHICLE_POS: ACCEPTED for the position the running dialogue asks for, else FAILED.
 - STORAGE_FORMAT (param1 1 and param2 1, else UNSUPPORTED): long-running; empties the FTP root
   (the vehicle's "SD card"); parameters and plans, which live beside it, stay.
@@ -42,6 +45,7 @@ from pathlib import Path
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from ..vehicles import rc
 from ..vehicles.prearm import PrearmDisplay
 from . import Incoming, Service
 from .accelcal import FAILURE, AccelCal, imu_error
@@ -107,6 +111,8 @@ class MaintenanceService(Service):
             steps.append(self._simple_accel)
         if p[5] == 2:
             steps.append(self._airspeed)
+        if p[3] == 1 and not any(p[:3]) and not any(p[4:]) and self.node.vehicle.radio_trim_sticks:
+            return self._trim_radio()
         interactive = p[0] == 3 or p[1] == 1 or p[3] == 1 or p[5] == 1
         if not steps or interactive:
             return UNSUPPORTED
@@ -157,6 +163,18 @@ class MaintenanceService(Service):
 
     def _airspeed(self) -> None:
         self.node.send_text(M.MAV_SEVERITY_INFO, "Airspeed 1 calibrated")
+
+    def _trim_radio(self) -> int:
+        """ArduPlane's / Rover's trim_radio: each trimmed stick's RCn_TRIM becomes its current input
+        (an RC override, else unchanged), at once: ACCEPTED."""
+        params, override = self.node.params, self.node.state.rc_override
+        for stick in self.node.vehicle.radio_trim_sticks:
+            n = rc.mapped_channel(params, stick)
+            pwm = override.get(n)
+            if pwm and f"RC{n}_TRIM" in params:
+                params.set(f"RC{n}_TRIM", pwm)
+        self._save_params()
+        return ACCEPTED
 
     def _param(self, name: str, default: float) -> float:
         return float(self.node.params.get(name)) if name in self.node.params else default

@@ -71,6 +71,9 @@ class VehicleType:
     not_produced: frozenset[int] = frozenset()  # message ids this vehicle never sends
     ardupilot_stream_rates: dict[str, int] = field(default_factory=dict)
     can_arm: bool = True  # a companion computer has nothing to arm
+    # PREFLIGHT_CALIBRATION param4 1 (ArduPlane's / Rover's trim_radio): the sticks (by rc.STICKS
+    # index) whose RCn_TRIM takes the current input; () = UNSUPPORTED (ArduCopter)
+    radio_trim_sticks: tuple[int, ...] = ()
 
     def parameter_set(self) -> str:
         return self.param_set or self.name

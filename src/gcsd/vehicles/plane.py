@@ -83,5 +83,6 @@ PLANE = VehicleType(
     settings=settings,
     prearm_checks=prearm.FLYING_CHECKS,
     commands=commands.PLANE_COMMANDS,
+    radio_trim_sticks=(0, 1, 3),  # trim_radio: roll, pitch, yaw
     ardupilot_stream_rates=stream_rates(1, 1, 1, 1, 1, 1, 1, 1, 10, 5),
 )

@@ -76,5 +76,6 @@ ROVER = VehicleType(
     settings=settings,
     prearm_checks=prearm.DRIVING_CHECKS,
     commands=commands.ROVER_COMMANDS,
+    radio_trim_sticks=(0,),  # trim_radio: steering
     ardupilot_stream_rates=stream_rates(1, 1, 1, 1, 1, 1, 1, 1, 10, 0),
 )
