@@ -170,7 +170,9 @@ def _list_download(port: int, timeout_s: float = 10.0) -> dict[str, float]:
                 if count is None:
                     conn.mav.param_request_list_send(1, 1)
                 else:
-                    for index in sorted(set(range(count)) - set(by_index))[:20]:
+                    # ArduCopter's 1 000 values come one per datagram: a client busy elsewhere loses
+                    # some from its socket buffer, so ask again for up to 100 at a time
+                    for index in sorted(set(range(count)) - set(by_index))[:100]:
                         conn.mav.param_request_read_send(1, 1, b"", index)
                 last_request = time.monotonic()
             msg = conn.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.2)
