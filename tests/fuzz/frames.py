@@ -6,7 +6,8 @@ frame is built by hand: the message's full payload length of random bytes (so it
 bit pattern: NaN with payloads, infinities, denormals, huge values), the target_system /
 target_component fields (where the message has them) set to the vehicle so the message is
 handled rather than ignored as addressed elsewhere, and the right CRC (X.25 with the message's
-CRC_EXTRA): the daemon parses it as a good frame and hands it to whatever handles that id.
+CRC_EXTRA): the daemon parses it as a good frame and hands it to whatever handles that id. Some
+of the classic ids (below 256) go as MAVLink1 frames with their payload cut short.
 """
 
 from __future__ import annotations
@@ -97,31 +98,41 @@ def payload_length(cls) -> int:
     return struct.calcsize(cls.unpacker.format)
 
 
-def random_frame(cls, rng: random.Random, seq: int, target: tuple[int, int] | None) -> bytes:
-    """A MAVLink2 frame of message `cls` with a random payload and a valid CRC."""
-    payload = bytearray(rng.randbytes(payload_length(cls)))
+def random_frame(cls, rng: random.Random, seq: int, target: tuple[int, int] | None, version: int = 2) -> bytes:
+    """A frame of message `cls` with a random payload and a valid CRC. MAVLink2: the full payload;
+    MAVLink1 (ids below 256): a payload cut anywhere from none to all of it (a receiver fills
+    what is missing with zeros, extensions included)."""
+    full = payload_length(cls)
+    payload = bytearray(rng.randbytes(full if version == 2 else rng.randint(0, full)))
     if target is not None:
         layout = field_layout(cls)
         for field, value in (("target_system", target[0]), ("target_component", target[1])):
             if field in layout:
                 offset, fmt = layout[field]
-                struct.pack_into(fmt, payload, offset, value)
+                if offset + struct.calcsize(fmt) <= len(payload):
+                    struct.pack_into(fmt, payload, offset, value)
     msgid = cls.id
-    header = bytes([0xFD, len(payload), 0, 0, seq & 0xFF, *SOURCE, msgid & 0xFF, (msgid >> 8) & 0xFF, msgid >> 16])
+    if version == 1:
+        header = bytes([0xFE, len(payload), seq & 0xFF, *SOURCE, msgid])
+    else:
+        header = bytes([0xFD, len(payload), 0, 0, seq & 0xFF, *SOURCE, msgid & 0xFF, (msgid >> 8) & 0xFF,
+                        msgid >> 16])
     crc = M.x25crc(header[1:] + bytes(payload))
     crc.accumulate(bytes([cls.crc_extra]))
     return header + bytes(payload) + struct.pack("<H", crc.crc)
 
 
 def message_chunks(target: tuple[int, int], seed: int, copies: int) -> Iterator[Chunk]:
-    """One chunk per message id of the dialect: `copies` random payloads, most of them addressed to us."""
+    """One chunk per message id of the dialect: `copies` random payloads, most of them addressed to
+    us, one in four of those with an id below 256 as MAVLink1."""
     rng = random.Random(seed)
     seq = 0
     for msgid in sorted(M.mavlink_map):
         cls = M.mavlink_map[msgid]
         frames = []
         for n in range(copies):
-            frames.append(random_frame(cls, rng, seq, target if n % 4 != 3 else None))
+            version = 1 if msgid < 256 and n % 4 == 2 else 2  # one in four of the classic ids as MAVLink1
+            frames.append(random_frame(cls, rng, seq, target if n % 4 != 3 else None, version))
             seq += 1
         yield Chunk(f"{cls.msgname} (id {msgid})", tuple(frames))
 
