@@ -232,37 +232,41 @@ def test_two_vehicle_side_swarms_are_one_fleet_and_each_request_reaches_one_vehi
     assert armed == {7}
 
 
-def test_companion_bridge_reached_from_the_ground_side_through_the_broker(broker, daemon, client, tmp_path):
-    topic = "gcsd/bridge"
-    modem = NullModem()
-    try:
-        daemon({"state_dir": str(tmp_path / "fc"), "vehicle": {"type": "copter", "sysid": 7},
-                "channels": [{"name": "telem1", "type": "serial", "device": modem.devices[0], "baud": 921600}]})
-        # the companion on its own sysid: it takes TOPIC/down/7 only because it learned the route to 7
-        daemon({"state_dir": str(tmp_path / "companion"), "vehicle": {"type": "companion", "sysid": 70},
-                "channels": [{"name": "fc", "type": "serial", "device": modem.devices[1], "baud": 921600},
-                             mqtt_channel(broker, "vehicle", topic)]})
-        ground = daemon(ground_side(tmp_path, broker, topic))
-        gcs = client(udp_url(ground.port("gcs")))
-        seen = heard_all(gcs, {(7, 1), (70, 191)})
-        assert seen.get((7, 1)) and seen[(7, 1)][-1].type == M.MAV_TYPE_QUADROTOR, "the flight controller"
-        assert seen.get((70, 191)) and seen[(70, 191)][-1].type == M.MAV_TYPE_ONBOARD_CONTROLLER, "the companion"
+@pytest.fixture
+def modem():
+    """A null-modem PTY pair, closed after the daemons using it have stopped (set up before them)."""
+    m = NullModem()
+    yield m
+    m.close()
 
-        assert param_value(gcs, (7, 1), b"SYSID_THISMAV") == 7.0
-        mark = gcs.mark()
-        gcs.send(M.MAVLink_param_set_message(7, 1, b"RC7_TRIM", 1555.0, M.MAV_PARAM_TYPE_INT16))
-        r = wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and r.msg.param_id == "RC7_TRIM", 3.0, mark)
-        assert r is not None and r.src == (7, 1) and r.msg.param_value == 1555.0
-        assert param_value(gcs, (7, 1), b"RC7_TRIM") == 1555.0
-        saved = tmp_path / "fc" / "mav.parm"
-        deadline = time.monotonic() + 5.0  # writes are batched, at most one file write per second
-        while "RC7_TRIM" not in saved.read_text() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        assert "RC7_TRIM" in saved.read_text(), "saved by the flight controller"
-        # the companion's own component answers for itself on the same path
-        assert param_value(gcs, (70, 191), b"SYSID_THISMAV") == 70.0
-    finally:
-        modem.close()
+
+def test_companion_bridge_reached_from_the_ground_side_through_the_broker(broker, modem, daemon, client, tmp_path):
+    topic = "gcsd/bridge"
+    daemon({"state_dir": str(tmp_path / "fc"), "vehicle": {"type": "copter", "sysid": 7},
+            "channels": [{"name": "telem1", "type": "serial", "device": modem.devices[0], "baud": 921600}]})
+    # the companion on its own sysid: it takes TOPIC/down/7 only because it learned the route to 7
+    daemon({"state_dir": str(tmp_path / "companion"), "vehicle": {"type": "companion", "sysid": 70},
+            "channels": [{"name": "fc", "type": "serial", "device": modem.devices[1], "baud": 921600},
+                         mqtt_channel(broker, "vehicle", topic)]})
+    ground = daemon(ground_side(tmp_path, broker, topic))
+    gcs = client(udp_url(ground.port("gcs")))
+    seen = heard_all(gcs, {(7, 1), (70, 191)})
+    assert seen.get((7, 1)) and seen[(7, 1)][-1].type == M.MAV_TYPE_QUADROTOR, "the flight controller"
+    assert seen.get((70, 191)) and seen[(70, 191)][-1].type == M.MAV_TYPE_ONBOARD_CONTROLLER, "the companion"
+
+    assert param_value(gcs, (7, 1), b"SYSID_THISMAV") == 7.0
+    mark = gcs.mark()
+    gcs.send(M.MAVLink_param_set_message(7, 1, b"RC7_TRIM", 1555.0, M.MAV_PARAM_TYPE_INT16))
+    r = wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and r.msg.param_id == "RC7_TRIM", 3.0, mark)
+    assert r is not None and r.src == (7, 1) and r.msg.param_value == 1555.0
+    assert param_value(gcs, (7, 1), b"RC7_TRIM") == 1555.0
+    saved = tmp_path / "fc" / "mav.parm"
+    deadline = time.monotonic() + 5.0  # writes are batched, at most one file write per second
+    while "RC7_TRIM" not in saved.read_text() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert "RC7_TRIM" in saved.read_text(), "saved by the flight controller"
+    # the companion's own component answers for itself on the same path
+    assert param_value(gcs, (70, 191), b"SYSID_THISMAV") == 70.0
 
 
 def test_broker_killed_and_restarted_both_sides_reconnect_and_telemetry_resumes(broker, daemon, client,
