@@ -404,6 +404,22 @@ def test_the_documented_mavsdk_and_pymavlink_urls_connect_to_the_default_configu
     assert asyncio.run(connect())
 
 
+def _limited_broadcast_reaches(listener: socket.socket) -> bool:
+    """Whether a datagram to 255.255.255.255 reaches `listener` here (it needs a route)."""
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
+    try:
+        probe.sendto(b"probe", ("255.255.255.255", listener.getsockname()[1]))
+    except OSError:
+        return False
+    finally:
+        probe.close()
+    if not select.select([listener], [], [], 1.0)[0]:
+        return False
+    listener.recv(100)
+    return True
+
+
 def test_the_default_configuration_is_found_by_a_listener_on_14550_as_qgroundcontrol(tmp_path):
     """QGroundControl binds UDP 14550 on every address and waits: the default's broadcast channel
     reaches it (255.255.255.255 is delivered to wildcard-bound sockets of this host too)."""
@@ -413,6 +429,9 @@ def test_the_default_configuration_is_found_by_a_listener_on_14550_as_qgroundcon
     except OSError:
         listener.close()
         pytest.skip("UDP 14550 is in use on this machine")
+    if not _limited_broadcast_reaches(listener):
+        listener.close()
+        pytest.skip("255.255.255.255 has no route on this machine (no network interface but lo)")
     daemon = Started([], tmp_path)
     parser = M.MAVLink(None)
     parser.robust_parsing = True
