@@ -33,29 +33,34 @@ class FuzzedDaemon:
     """`gcsd run` in a subprocess with one UDP server channel, and a raw UDP socket talking to it."""
 
     def __init__(self, tmp_path: Path, vehicle: str) -> None:
-        probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        probe.bind(("127.0.0.1", 0))
-        self.port = probe.getsockname()[1]
-        probe.close()
         self.config = tmp_path / "gcsd.yaml"
-        self.config.write_text(
+        self.config.write_text(  # port 0: the daemon picks a free port and logs it (no race for a port)
             f"vehicle: {{type: {vehicle}}}\nstate_dir: {tmp_path / 'state'}\nlog: {{level: info, format: json}}\n"
-            f"channels:\n  - {{name: gcs, type: udp-server, address: '127.0.0.1:{self.port}'}}\n")
+            "channels:\n  - {name: gcs, type: udp-server, address: '127.0.0.1:0'}\n")
         self.log_path = tmp_path / "gcsd.log"
         self._log = self.log_path.open("ab")
-        self._launch()
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.connect(("127.0.0.1", self.port))
-        self.sock.setblocking(False)
+        self.sock: socket.socket | None = None
+        self.port = 0
         self.mav = M.MAVLink(None, srcSystem=SOURCE[0], srcComponent=SOURCE[1])
         self.mav.robust_parsing = True
         self.barriers = 0
         self.heartbeats: list[float] = []
+        self._launch()
 
     def _launch(self) -> None:
+        self._log_start = self.log_path.stat().st_size
         env = dict(os.environ, PATH=str(Path(sys.executable).parent) + os.pathsep + os.environ.get("PATH", ""))
         self.proc = subprocess.Popen([sys.executable, "-m", "gcsd", "run", "-c", str(self.config)],
                                      stdout=self._log, stderr=subprocess.STDOUT, env=env)
+
+    def _opened_port(self) -> int | None:
+        """The port of this run's `channel_opened` log record, once it is written."""
+        with self.log_path.open("rb") as f:
+            f.seek(self._log_start)
+            for line in f.read().decode(errors="replace").splitlines():
+                if '"channel_opened"' in line:
+                    return int(json.loads(line)["address"].rsplit(":", 1)[1])
+        return None
 
     def restart(self) -> int:
         """A clean stop (SIGTERM) and a new start on the same state directory: the stop's exit code."""
@@ -111,6 +116,19 @@ class FuzzedDaemon:
         return self.proc.poll() is None
 
     def start(self) -> None:
+        """Wait for the channel to open, connect to it and exchange heartbeats."""
+        end = time.monotonic() + START_TIMEOUT_S
+        port = self._opened_port()
+        while port is None and self.alive() and time.monotonic() < end:
+            time.sleep(0.05)
+            port = self._opened_port()
+        assert port is not None, f"the daemon did not open its channel:\n{self.log_tail()}"
+        if self.sock is not None:
+            self.sock.close()
+        self.port = port
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.connect(("127.0.0.1", port))
+        self.sock.setblocking(False)
         first = self.wait_for(lambda m: m.get_type() == "HEARTBEAT", START_TIMEOUT_S,
                               resend=lambda: self.send_msg(M.MAVLink_heartbeat_message(
                                   M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3)), every_s=0.2)
@@ -156,7 +174,8 @@ class FuzzedDaemon:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
-        self.sock.close()
+        if self.sock is not None:
+            self.sock.close()
         self._log.close()
 
     # --- a plain ground station ---------------------------------------------------------------
