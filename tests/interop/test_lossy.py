@@ -25,13 +25,11 @@ import os
 import re
 import sys
 import time
-from contextlib import asynccontextmanager
 
 import pytest
 
 pytest.importorskip("mavsdk.asyncio", reason="mavsdk is a test extra: pip install -e .[test]")
 
-from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
 from mavsdk.asyncio.plugins.mission_raw import MissionItem, MissionRawAsync, MissionRawError
 from mavsdk.asyncio.plugins.param import ParamAsync
 from pymavlink.dialects.v20 import ardupilotmega as M
@@ -41,23 +39,12 @@ from integration.mission_client import LossyProxy, MissionClient
 
 from .conftest import DEFAULT_HOME
 from .conftest import mavproxy_script as _mavproxy_script
+from .test_mission_interop import ground_station  # MAVSDK as a ground station on udpout
 
 ITEMS = 500 if os.environ.get("GCSD_LONG_TESTS") else 100
 LOSS = 0.2
 HOME_X, HOME_Y = round(DEFAULT_HOME.lat_deg * 1e7), round(DEFAULT_HOME.lon_deg * 1e7)
 LAT, LON = -353630000, 1491650000
-
-
-@asynccontextmanager
-async def ground_station(port: int):
-    mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
-    try:
-        await mavsdk.add_any_connection(f"udpout://127.0.0.1:{port}")
-        system = await mavsdk.first_autopilot(timeout_s=10.0)
-        assert system is not None, "MAVSDK found no autopilot"
-        yield system
-    finally:
-        mavsdk.destroy()
 
 
 def read_back(port: int, mission_type: int = 0):
