@@ -1,8 +1,8 @@
 """Parity of gcsd's parameter sets with ArduPilot: the PARAM_VALUE list a copter, plane or rover
-serves with the default configuration equals ArduPilot SITL's (../shared/ardupilot/*-params.tsv)
-mapped to 4.6, in names, order, types and values.
+serves with the default configuration equals ArduPilot SITL's (the captures, copied to
+tests/integration/data/ardupilot/*-params.tsv) mapped to 4.6, in names, order, types and values.
 
-The oracle here is written from ../shared/ardupilot/README.md alone, not from the build script
+The oracle here is written from the captures' README alone, not from the build script
 (tools/param_data.py): MAV{n}_X -> SR{n-1}_X, MAV_SYSID -> SYSID_THISMAV, MAV_GCS_SYSID ->
 SYSID_MYGCS, MAV_TELEM_DELAY -> TELEM_DELAY, MAV_OPTIONS -> SYSID_ENFORCE (AP_Int8 in 4.6), and
 MAV{n}_OPTIONS plus the 4.7 additions below are not 4.6 parameters. The documented differences:
@@ -29,7 +29,7 @@ from gcsd.params import INT8, INT16, INT32, REAL32, ParamStore, SetResult, param
 from gcsd.streams import PARAM_SUFFIX
 from gcsd.vehicles import VEHICLE_TYPES, vehicle_params
 
-SHARED = Path(__file__).resolve().parents[3] / "shared" / "ardupilot"
+CAPTURES = Path(__file__).resolve().parents[1] / "integration" / "data" / "ardupilot"  # copies of the captures
 TYPES = {"INT8": INT8, "INT16": INT16, "INT32": INT32, "REAL32": REAL32}
 RENAMED = {"MAV_SYSID": "SYSID_THISMAV", "MAV_GCS_SYSID": "SYSID_MYGCS", "MAV_TELEM_DELAY": "TELEM_DELAY",
            "MAV_OPTIONS": "SYSID_ENFORCE"}
@@ -48,7 +48,6 @@ SIM_GPS = {"SIM_GPS1_ENABLE": ("SIM_GPS_DISABLE", "INT8", 0.0), "SIM_GPS1_NUMSAT
            "SIM_GPS1_ACC": ("SIM_GPS_HDOP", "REAL32", 0.7)}
 SIM_VALUES = {"SIM_RATE_HZ": 25.0}
 
-pytestmark = pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/ardupilot is not here")
 
 
 def f32(value: float) -> float:
@@ -58,7 +57,7 @@ def f32(value: float) -> float:
 def capture_as_46(vehicle: str) -> list[tuple[str, str, float]]:
     """The SITL capture mapped to 4.6, with gcsd's documented differences applied."""
     out = []
-    for line in (SHARED / f"{vehicle}-params.tsv").read_text().splitlines():
+    for line in (CAPTURES / f"{vehicle}-params.tsv").read_text().splitlines():
         if line.startswith("#"):
             continue
         name, ptype, value = line.split("\t")
