@@ -139,9 +139,9 @@ def armed_in_guided(c: Client) -> None:
     assert ack(c, lambda: c.command_long(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 5), M.MAV_CMD_NAV_TAKEOFF) == 0
 
 
-def local_target(mask: int, x=0.0, y=0.0, z=0.0, vx=0.0, vy=0.0, vz=0.0, yaw=0.0):
+def local_target(mask: int, x=0.0, y=0.0, z=0.0, vx=0.0, vy=0.0, vz=0.0, afx=0.0, yaw=0.0):
     return M.MAVLink_set_position_target_local_ned_message(0, *VEHICLE, M.MAV_FRAME_LOCAL_OFFSET_NED, mask,
-                                                           x, y, z, vx, vy, vz, 0, 0, 0, yaw, 0)
+                                                           x, y, z, vx, vy, vz, afx, 0, 0, yaw, 0)
 
 
 def global_target(mask: int, lat: int, lon: int, alt: float, yaw: float = 0.0):
@@ -159,13 +159,14 @@ def wp_dist_after(c: Client, msg, seconds: float = 1.0) -> list[int]:
 
 @pytest.mark.parametrize("bad", [
     local_target(IGNORE_ALL_BUT_POSITION, x=NAN, z=-5),
-    local_target(IGNORE_ALL_BUT_POSITION, x=100, y=INF, z=-5),
-    local_target(IGNORE_ALL_BUT_POSITION & ~(1 << 10), x=100, z=-5, yaw=NAN),
+    local_target(IGNORE_ALL_BUT_POSITION, x=-300, y=INF, z=-5),
+    local_target(IGNORE_ALL_BUT_POSITION & ~(1 << 10), x=-300, z=-5, yaw=NAN),  # taken, it would be 400 m away
     local_target(IGNORE_ALL_BUT_VELOCITY, vx=NAN),
     local_target(IGNORE_ALL_BUT_VELOCITY, vz=-INF),
+    local_target(IGNORE_ALL_BUT_POSITION & ~(0b111 << 6), x=-300, z=-5, afx=NAN),
     global_target(IGNORE_ALL_BUT_POSITION, int(HOME_LAT * 1e7) + 9000, int(HOME_LON * 1e7), NAN),
     global_target(IGNORE_ALL_BUT_POSITION, 2_000_000_000, int(HOME_LON * 1e7), 10.0),
-], ids=["local-x-nan", "local-y-inf", "local-yaw-nan", "velocity-nan", "velocity-inf", "global-alt-nan",
+], ids=["local-x-nan", "local-y-inf", "local-yaw-nan", "velocity-nan", "velocity-inf", "accel-nan", "global-alt-nan",
         "global-lat-out-of-range"])
 def test_a_guided_target_with_a_bad_value_is_dropped_and_the_old_target_kept(daemon, client, bad):
     c = connect(daemon, client)
