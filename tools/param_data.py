@@ -60,6 +60,9 @@ SIM_RANGES = {  # gcsd's simulation limits (no published metadata for SITL param
     "SIM_GPS_HDOP": ("0.1", "99", "", "HDOP of the simulated GPS"),
 }
 SIM_VALUES = {"SIM_RATE_HZ": "25"}
+# STAT_BOOTCNT: the capture's 1 is after SITL's first boot; the firmware default is 0, and gcsd
+# counts its own starts from there (its first start shows 1, as the capture).
+COUNTED = {"STAT_BOOTCNT": "0"}
 READ_ONLY_GCSD = {"STAT_BOOTCNT", "STAT_RUNTIME", "FORMAT_VERSION"}  # maintained by gcsd
 # The other types' own parameters gcsd acts on that no capture has: name -> (type, default).
 OWN = {
@@ -125,7 +128,7 @@ def mapped(capture, meta) -> list[tuple[str, str, str]]:
         new = to_46(name)
         if new is None or new not in meta:
             continue
-        out.append((new, TYPE_46.get(new, ptype), value))
+        out.append((new, TYPE_46.get(new, ptype), COUNTED.get(new, value)))
     return out
 
 

@@ -13,6 +13,8 @@ MAV{n}_OPTIONS plus the 4.7 additions below are not 4.6 parameters. The document
   SIM_GPS_DISABLE, SIM_GPS_NUMSATS, SIM_GPS_HDOP where 4.7 has SIM_GPS1_ENABLE/_NUMSATS/_ACC.
 - SR0_*: the configuration's stream rates for channel 0 (SPEC.md's YAML contract), not the
   capture's (which are the SITL serial port's).
+- STAT_BOOTCNT: the firmware default 0; the capture's 1 is after SITL's first boot, and a
+  daemon's first start counts to 1 too (tests/integration/test_param_parity.py).
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ SIM_SERVED = {"SIM_SPEEDUP", "SIM_RATE_HZ", "SIM_WIND_SPD", "SIM_WIND_DIR", "SIM
 SIM_GPS = {"SIM_GPS1_ENABLE": ("SIM_GPS_DISABLE", "INT8", 0.0), "SIM_GPS1_NUMSATS": ("SIM_GPS_NUMSATS", "INT8", None),
            "SIM_GPS1_ACC": ("SIM_GPS_HDOP", "REAL32", 0.7)}
 SIM_VALUES = {"SIM_RATE_HZ": 25.0}
+FIRMWARE_DEFAULTS = {"STAT_BOOTCNT": 0.0}  # the capture's 1 counts SITL's first boot; gcsd counts its own
 
 
 
@@ -71,7 +74,8 @@ def capture_as_46(vehicle: str) -> list[tuple[str, str, float]]:
             continue
         m = re.fullmatch(r"MAV(\d+)_(\w+)", name)
         name = f"SR{int(m.group(1)) - 1}_{m.group(2)}" if m else RENAMED.get(name, name)
-        out.append((name, TYPE_46.get(name, ptype), SIM_VALUES.get(name, float(value))))
+        value = FIRMWARE_DEFAULTS.get(name, SIM_VALUES.get(name, float(value)))
+        out.append((name, TYPE_46.get(name, ptype), value))
     for stream, rate in DEFAULT_STREAM_RATES_HZ.items():  # channel 0's configured stream rates
         sr0 = f"SR0_{PARAM_SUFFIX[stream]}"
         out = [(n, t, float(rate) if n == sr0 else v) for n, t, v in out]
