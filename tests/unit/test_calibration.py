@@ -142,3 +142,13 @@ def test_radio_trim_on_a_plane_takes_the_current_sticks_and_a_copter_has_none(tm
     assert (p("RC1_TRIM"), p("RC2_TRIM"), p("RC4_TRIM")) == (1550, 1450, rc4)  # yaw had no input
     copter = Harness(tmp_path / "c")
     assert copter.command(M.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 1) == M.MAV_RESULT_UNSUPPORTED
+
+
+def test_auto_reboot_reboots_once_every_compass_is_saved_and_reported(tmp_path):
+    h = Harness(tmp_path)
+    boots = h.node.params.get("STAT_BOOTCNT")
+    mark = h.mark()
+    assert h.command(M.MAV_CMD_DO_START_MAG_CAL, 0, 0, 1, 0, 1) == ACCEPTED  # autosave, auto-reboot
+    assert h.run(magcal.MAG_CAL_S + 6, until=lambda: h.node.params.get("STAT_BOOTCNT") == boots + 1)
+    assert len(h.of_type("MAG_CAL_REPORT", mark)) == 3 * magcal.REPORT_REPEATS  # reported first
+    assert h.run(2, until=lambda: "Rebooting" in h.texts(mark))

@@ -17,6 +17,8 @@ RUNNING_STEP_TWO -> SUCCESS. MAG_CAL_PROGRESS for each running compass every PRO
 it); at the end MAG_CAL_REPORT with the offsets, diagonals and off-diagonals found,
 `REPORT_REPEATS` times a second apart (a lost report would leave QGroundControl waiting).
 With autosave the result is saved at once (autosaved 1); else it waits for DO_ACCEPT_MAG_CAL.
+With auto-reboot (param5) the vehicle reboots once every compass is saved and reported
+(`reboot_due`, acted on by the owner), as ArduPilot does after an autosaved calibration.
 
 The simulated vehicle cannot be rotated by the user, so a calibration takes MAG_CAL_S of time
 instead of rotations. What it finds is the simulated magnetometer's error, as on ArduPilot SITL:
@@ -71,7 +73,9 @@ class MagCal:
     params: object
     runs: dict[int, CompassRun] = field(default_factory=dict)
     autosave: bool = False
+    autoreboot: bool = False
     saved_any: bool = False
+    reboot_due: bool = False  # autoreboot: every compass saved and reported; the owner reboots
 
     # --- which compasses ---------------------------------------------------------------------
     def compasses(self) -> list[int]:
@@ -88,7 +92,7 @@ class MagCal:
         return out
 
     # --- commands ----------------------------------------------------------------------------
-    def start(self, mask: float, autosave: bool, delay_s: float, now: float) -> int:
+    def start(self, mask: float, autosave: bool, delay_s: float, now: float, autoreboot: bool = False) -> int:
         if not 0 <= mask <= 255:
             return FAILED
         selected = [i for i in self.compasses() if int(mask) == 0 or int(mask) & (1 << i)]
@@ -96,6 +100,7 @@ class MagCal:
             return FAILED
         delay_s = max(0.0, min(delay_s, 60.0)) if math.isfinite(delay_s) else 0.0
         self.autosave = autosave
+        self.autoreboot = autoreboot
         self.runs = {i: CompassRun(i, now + delay_s, next_send_s=now) for i in selected}
         return ACCEPTED
 
@@ -192,6 +197,7 @@ class MagCal:
                 run.index, mask, run.status, 1, pct, completion_mask, 0.0, 0.0, 0.0))
         if self.runs and not any(r.reports_left > 0 or not r.saved for r in self.runs.values()):
             self.runs = {}  # autosaved and reported: nothing left to accept
+            self.reboot_due = self.autoreboot
         return out
 
     def _report(self, run: CompassRun, mask: int):

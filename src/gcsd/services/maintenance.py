@@ -32,7 +32,8 @@
   (`vehicles.prearm.PrearmDisplay`: every 30 s, or 4 s after they change).
 - DO_START_MAG_CAL, DO_ACCEPT_MAG_CAL, DO_CANCEL_MAG_CAL: a simulated onboard compass
   calibration (`magcal`): MAG_CAL_PROGRESS and MAG_CAL_REPORT to every ground station,
-  results into COMPASS_OFS*/DIA*/ODI* when accepted, or at once with autosave (param3 1).
+  results into COMPASS_OFS*/DIA*/ODI* when accepted, or at once with autosave (param3 1);
+  with auto-reboot (param5 1) the vehicle then reboots.
   FIXED_MAG_CAL_YAW saves the offsets at once (disarmed).
 """
 
@@ -266,6 +267,10 @@ class MaintenanceService(Service):
             return UNSUPPORTED
         if self.node.state.armed:
             return FAILED
+        self._reboot_now()
+        return ACCEPTED
+
+    def _reboot_now(self) -> None:
         self.node.send_text(M.MAV_SEVERITY_INFO, "Rebooting")
         self.mag.cancel()  # a reboot ends whatever calibration was running, unsaved
         self.accel.cancel()
@@ -278,7 +283,6 @@ class MaintenanceService(Service):
         except OSError as exc:
             log.error("params_save_failed", error=str(exc))
         self.node.send_banner()
-        return ACCEPTED
 
     def run_prearm_checks(self, req: CommandRequest) -> int:
         if self.node.state.armed:
@@ -295,7 +299,8 @@ class MaintenanceService(Service):
         if not self.mag.compasses():
             return UNSUPPORTED
         delay = req.param4 if math.isfinite(req.param4) else 0.0
-        result = self.mag.start(req.param1 if math.isfinite(req.param1) else -1, req.param3 != 0, delay, req.inc.now)
+        result = self.mag.start(req.param1 if math.isfinite(req.param1) else -1, req.param3 != 0, delay, req.inc.now,
+                                autoreboot=math.isfinite(req.x) and req.x != 0)
         if result == ACCEPTED:
             self.node.wake(req.inc.channel)
         return result
@@ -341,6 +346,9 @@ class MaintenanceService(Service):
             if self.mag.saved_any:
                 self.mag.saved_any = False
                 self._save_params()
+        if self.mag.reboot_due and not self.node.state.armed:
+            self.mag.reboot_due = False
+            self._reboot_now()
         return due + self.mag_outbox.pop(channel.index, [])
 
     # --- the send pass -----------------------------------------------------------------------
