@@ -12,8 +12,9 @@ FTPManager, PlanManager; summarised in ../shared/QGC.md), sent as QGroundControl
    official with a git hash (QGC picks its 4.6 parameter metadata from it) and the capabilities
    QGC assumes for ArduPilot (MAVLINK2, MISSION_INT, COMMAND_INT, MISSION_FENCE, MISSION_RALLY)
    plus FTP (QGC downloads parameters over FTP only then);
- - 1: REQUEST_MESSAGE(AVAILABLE_MODES, param2 1): not ACCEPTED, which makes QGC keep its built-in
-   ArduCopter mode table (as with an ArduPilot 4.6 build, which does not send AVAILABLE_MODES);
+ - 1: REQUEST_MESSAGE(AVAILABLE_MODES, param2 1), then each further index up to number_modes: each
+   ACCEPTED and the mode within 1 s (ArduPilot's send_available_mode: non-standard modes, custom
+   mode number and name), which QGC's StandardModes turns into its mode list;
  - 2: REQUEST_MESSAGE(COMPONENT_METADATA), then (COMPONENT_INFORMATION): not ACCEPTED (ArduPilot
    has neither; QGC skips the component metadata);
  - 3: FTP OpenFileRO "@PARAM/param.pck", BurstReadFile to the end (ReadFile for any gap),
@@ -31,6 +32,7 @@ import struct
 import time
 
 import pytest
+from pymavlink.dialects.v20 import all as ALL
 
 from .helpers import VEHICLE, M, is_ack, pump, rate_hz, wait_for
 
@@ -160,9 +162,24 @@ def test_qgroundcontrol_connect_sequence_step_by_step(daemon, client):
                 M.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT, M.MAV_PROTOCOL_CAPABILITY_COMPASS_CALIBRATION):
         assert v.capabilities & cap, f"capability {cap} missing"
 
-    # 1: standard modes; 2: component metadata, then component information
-    for msgid, param2 in ((AVAILABLE_MODES, 1), (COMPONENT_METADATA, 0), (COMPONENT_INFORMATION, 0)):
-        ack, _ = _request_message(gcs, msgid, param2)
+    # 1: standard modes, as QGC's StandardModes: index 1, then every other index up to number_modes
+    modes = {}
+    index, count = 1, 1
+    while index <= count:
+        ack, mark = _request_message(gcs, AVAILABLE_MODES, index)
+        assert ack.msg.result == M.MAV_RESULT_ACCEPTED, f"AVAILABLE_MODES {index} refused"
+        got = wait_for(gcs, lambda r: r.type == f"UNKNOWN_{AVAILABLE_MODES}", 1.0, since=mark)
+        assert got is not None, f"AVAILABLE_MODES {index} did not follow the ACCEPTED ack within 1 s"
+        m = ALL.MAVLink(None).parse_buffer(got.raw)[0]  # newer than the ardupilotmega dialect
+        assert m.mode_index == index and m.standard_mode == ALL.MAV_STANDARD_MODE_NON_STANDARD
+        count = m.number_modes
+        modes[m.custom_mode] = m.mode_name
+        index += 1
+    assert len(modes) == count > 10
+    assert {modes[0], modes[4], modes[5], modes[6]} == {"STABILIZE", "GUIDED", "LOITER", "RTL"}
+    # 2: component metadata, then component information
+    for msgid in (COMPONENT_METADATA, COMPONENT_INFORMATION):
+        ack, _ = _request_message(gcs, msgid)
         assert ack.msg.result != M.MAV_RESULT_ACCEPTED, f"REQUEST_MESSAGE({msgid}) accepted"
 
     # 3: parameters over FTP, as QGC's _tryftp

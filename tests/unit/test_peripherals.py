@@ -102,3 +102,17 @@ def test_motor_test_refused_with_arducopters_reasons(tmp_path):
     h.run(0.5)
     assert "Motor Test: RC not calibrated" in h.texts(mark)
     assert h.command(M.MAV_CMD_DO_MOTOR_TEST, 9, M.MOTOR_TEST_THROTTLE_PERCENT, 10, 1) == FAILED  # a quad has 4
+
+
+def test_available_modes_one_index_or_all_after_the_ack(tmp_path):
+    h = Harness(tmp_path, vehicle="rover")
+    count = len(h.node.vehicle.modes)
+    mark = h.mark()
+    assert h.command(M.MAV_CMD_REQUEST_MESSAGE, 435, 0) == ACCEPTED  # every mode
+    h.run(0.2)
+    got = [m for m in h.received[mark:] if m.get_type() == "UNKNOWN_435"]
+    assert len(got) == count
+    types = [m.get_type() for m in h.received[mark:]]
+    assert types.index("COMMAND_ACK") < types.index("UNKNOWN_435")  # the ACK first, as QGC expects
+    assert h.command(M.MAV_CMD_REQUEST_MESSAGE, 435, count + 1) == DENIED
+    assert h.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION) == ACCEPTED  # others go on

@@ -31,12 +31,14 @@ def attach_services(node, config) -> None:
     from ..services.flight import FlightService
     from ..services.highlatency import HighLatencyService
     from ..services.maintenance import MaintenanceService
+    from ..services.modes import ModesService
     from ..services.peripherals import PeripheralService
 
     ftp_root = Path(node.state_dir) / config.ftp.root if node.state_dir is not None else None
     node.add_service(FlightService(node))
     node.add_service(MaintenanceService(node, ftp_root))
     node.add_service(PeripheralService(node))
+    node.add_service(ModesService(node))  # AVAILABLE_MODES; other REQUEST_MESSAGEs go on to the rates service
     node.add_service(HighLatencyService(node))
     serial_control = getattr(config, "serial_control", ())
     if serial_control and node.index == 0:  # one owner per device, even in a swarm
