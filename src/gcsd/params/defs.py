@@ -29,7 +29,6 @@ from .store import INT8, INT16, INT32, REAL32, ParamDef, as_float
 DATA_DIR = Path(__file__).resolve().parent / "data"
 TYPES = {"INT8": INT8, "INT16": INT16, "INT32": INT32, "REAL32": REAL32}
 NEXT_START = frozenset({"SYSID_THISMAV", "SCHED_LOOP_RATE"})
-SETS = ("copter", "plane", "rover", "sub", "tracker", "blimp", "companion")
 
 
 def _number(text: str) -> float | None:

@@ -48,7 +48,8 @@ def switch_position(pwm: int) -> int | None:
 def mapped_channel(params, index: int) -> int:
     """The RC channel of stick `index` (0 roll, 1 pitch, 2 throttle, 3 yaw): RCMAP_*, or 1..4."""
     name = STICKS[index]
-    return int(params.get(name)) if name in params else DEFAULT_MAP[index]
+    channel = int(params.get(name)) if name in params else DEFAULT_MAP[index]
+    return channel if 1 <= channel <= 16 else DEFAULT_MAP[index]  # RCMAP_* 0 or wild: the default
 
 
 def scaled(get: Get, n: int, pwm: int) -> float:
