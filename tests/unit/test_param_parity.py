@@ -208,3 +208,19 @@ def test_the_docs_state_the_served_and_acting_counts_of_each_type():
         store = ParamStore(vehicle_params(v, 1, 255, False, [dict(DEFAULT_STREAM_RATES_HZ)], 1.0))
         counts[name] = (len(store), sum(1 for e in store.entries() if e.name in acting))
     assert stated_counts() == counts
+
+
+@pytest.mark.parametrize("vehicle", sorted(VEHICLE_TYPES))
+def test_every_vehicle_type_serves_its_whole_set_after_its_banner(tmp_path, vehicle):
+    from pymavlink.dialects.v20 import ardupilotmega as M
+    from vehicle_harness import Harness
+
+    h = Harness(tmp_path, vehicle=vehicle)
+    mark = h.mark()
+    h.send(M.MAVLink_param_request_list_message(h.node.sysid, 1))
+    h.run(1.0, step=0.01)  # the list goes at 25 values per 10 ms
+    values = h.of_type("PARAM_VALUE", mark)
+    assert sorted(v.param_index for v in values) == list(range(len(h.node.params)))
+    firmware = h.node.vehicle.firmware
+    banner = h.texts(mark)[0]
+    assert banner == (f"{firmware} V4.6.3 (3fc7011a)" if firmware else "gcsd 0.1.0 (companion computer)")
