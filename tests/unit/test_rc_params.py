@@ -181,3 +181,43 @@ def test_manual_control_drives_the_channels_rcmap_names(tmp_path):
     assert h.state.rc_override[6] < 1500 and 2 not in h.state.rc_override
     h.run(1.5)
     assert h.state.groundspeed_ms > 0.5
+
+
+def test_rudder_right_with_throttle_down_arms_after_two_seconds_and_left_disarms(tmp_path):
+    h = Harness(tmp_path)
+    h.set_param("FS_THR_ENABLE", 0)
+    override(h, ch3=1000, ch4=2000)  # throttle at RC3_MIN, yaw full right
+    h.run(1.5)
+    assert not h.state.armed  # not yet: the gesture is held 2 s
+    override(h, ch3=1000, ch4=2000)
+    h.run(1.0)
+    assert h.state.armed
+    override(h, ch3=1000, ch4=1000)  # full left, on the ground
+    h.run(2.5)
+    assert not h.state.armed
+
+
+def test_arming_rudder_0_disables_the_gesture_and_1_only_arms(tmp_path):
+    h = Harness(tmp_path)
+    h.set_param("FS_THR_ENABLE", 0)
+    h.set_param("ARMING_RUDDER", 0)
+    override(h, ch3=1000, ch4=2000)
+    h.run(2.5)
+    assert not h.state.armed
+    h.set_param("ARMING_RUDDER", 1)
+    override(h, ch3=1000, ch4=2000)
+    h.run(2.5)
+    assert h.state.armed
+    override(h, ch3=1000, ch4=1000)
+    h.run(2.5)
+    assert h.state.armed  # 1: arming only
+
+
+def test_rudder_arming_runs_the_pre_arm_checks(tmp_path):
+    h = Harness(tmp_path)
+    h.set_param("FS_THR_ENABLE", 0)
+    h.set_param("RC1_MIN", 1400)  # pre-arm: RC1_MIN too high
+    mark = h.mark()
+    override(h, ch3=1000, ch4=2000)
+    h.run(2.5)
+    assert not h.state.armed and "PreArm: RC1_MIN too high" in h.texts(mark)

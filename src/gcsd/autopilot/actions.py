@@ -218,6 +218,11 @@ class Actions:
         control = getattr(self.node, "control", None)
         if mode is not None and control is not None:
             control.set_mode(mode)  # refused with a STATUSTEXT, as a ground station's request
+        gesture = self.rc.rudder_arming(self.params, s.rc_override, now, s.armed)
+        if gesture == "arm" and control is not None:
+            control.arm_by_rudder()
+        elif gesture == "disarm" and s.on_ground and control is not None:
+            control.disarm_by_rudder()
 
     def sticks(self, now: float) -> tuple[float, float, float, float]:
         """Roll, pitch, throttle, yaw in -1..1 from RC overrides: RCMAP_*, RCn_TRIM/_DZ/_MIN/_MAX/

@@ -53,6 +53,13 @@ class ControlService(Service):
             return self._disarm(forced)
         return _UNSUPPORTED
 
+    def arm_by_rudder(self) -> bool:
+        """ARMING_RUDDER's gesture (gcsd.vehicles.rc): arming with the same checks as a command."""
+        return self._arm(False) == _ACCEPTED
+
+    def disarm_by_rudder(self) -> bool:
+        return self._disarm(False) == _ACCEPTED
+
     def _arm(self, forced: bool) -> int:
         node = self.node
         state = node.state

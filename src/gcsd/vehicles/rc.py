@@ -22,6 +22,10 @@ RC_OVERRIDE_TIME seconds). Decisions, and why:
   THR_FS_VALUE: a receiver that signals loss by low throttle). Until overrides are first used
   the receiver at rest is valid, so a vehicle flown only by mission commands never has an RC
   failsafe. While RC is lost the mode switch is not read.
+- Rudder arming (ARMING_RUDDER 1 arm, 2 arm and disarm): throttle at zero (at or below
+  RCn_MIN + RCn_DZ of the throttle channel) and yaw full right (beyond 4000 of 4500) held 2 s
+  arms, through the same pre-arm checks as a command; full left held 2 s disarms on the ground
+  (ArduCopter's arm_motors_check, ARM_DELAY / DISARM_DELAY of 2 s).
 """
 
 from __future__ import annotations
@@ -30,6 +34,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 SWITCH_DEBOUNCE_S = 0.2
+RUDDER_HOLD_S = 2.0
+RUDDER_FULL = 4000 / 4500  # yaw beyond this fraction of full deflection
 PWM_VALID = (900, 2200)  # exclusive: RC_MIN_LIMIT_PWM / RC_MAX_LIMIT_PWM in read_mode_switch
 BANDS = (1231, 1361, 1491, 1621, 1750)
 STICKS = ("RCMAP_ROLL", "RCMAP_PITCH", "RCMAP_THROTTLE", "RCMAP_YAW")
@@ -89,6 +95,7 @@ class RcInput:
     used: bool = False  # a ground station has driven the RC input with overrides
     position: int | None = None  # the mode switch's settled position
     pending: tuple[int, float] | None = None  # a new position and when it was first seen
+    rudder: tuple[str, float] | None = None  # "arm" / "disarm" held since
 
     def value(self, params, override: dict[int, int], n: int) -> int:
         return override.get(n) or int(params.get(f"RC{n}_TRIM"))
@@ -137,3 +144,26 @@ class RcInput:
             return None
         self.position, self.pending = position, None
         return int(params.get(f"{names[1]}{position + 1}"))
+
+    def rudder_arming(self, params, override: dict[int, int], now: float, armed: bool) -> str | None:
+        """"arm" or "disarm" once the rudder gesture has been held RUDDER_HOLD_S, else None."""
+        mode = int(params.get("ARMING_RUDDER")) if "ARMING_RUDDER" in params else 0
+        throttle, yaw = mapped_channel(params, 2), mapped_channel(params, 3)
+        gesture = None
+        if mode and throttle in override and yaw in override and not self.lost(params, override):
+            low = override[throttle] <= params.get(f"RC{throttle}_MIN") + params.get(f"RC{throttle}_DZ")
+            stick = scaled(params.get, yaw, override[yaw])
+            if low and stick > RUDDER_FULL and not armed:
+                gesture = "arm"
+            elif low and stick < -RUDDER_FULL and armed and mode == 2:
+                gesture = "disarm"
+        if gesture is None:
+            self.rudder = None
+            return None
+        if self.rudder is None or self.rudder[0] != gesture:
+            self.rudder = (gesture, now)
+            return None
+        if now - self.rudder[1] < RUDDER_HOLD_S:
+            return None
+        self.rudder = ("done", now)  # once per gesture: released and held again to repeat
+        return gesture
