@@ -221,3 +221,23 @@ def test_rudder_arming_runs_the_pre_arm_checks(tmp_path):
     override(h, ch3=1000, ch4=2000)
     h.run(2.5)
     assert not h.state.armed and "PreArm: RC1_MIN too high" in h.texts(mark)
+
+
+def test_the_throttle_stick_climbs_at_pilot_speed_up_and_descends_at_pilot_speed_dn(tmp_path):
+    h = flying(tmp_path, alt=20.0)
+    h.mode("ALT_HOLD")
+    h.set_param("FS_THR_ENABLE", 0)
+    override(h, ch3=2000)  # full up
+    h.run(2.0)
+    assert -h.state.vd_ms == pytest.approx(2.5, abs=0.1)  # PILOT_SPEED_UP 250 cm/s
+    h.set_param("PILOT_SPEED_UP", 100)
+    override(h, ch3=2000)
+    h.run(2.0)
+    assert -h.state.vd_ms == pytest.approx(1.0, abs=0.1)
+    override(h, ch3=1000)  # full down: PILOT_SPEED_DN 0 means PILOT_SPEED_UP
+    h.run(2.0)
+    assert h.state.vd_ms == pytest.approx(1.0, abs=0.1)
+    h.set_param("PILOT_SPEED_DN", 150)
+    override(h, ch3=1000)
+    h.run(2.0)
+    assert h.state.vd_ms == pytest.approx(1.5, abs=0.1)

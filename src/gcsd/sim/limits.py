@@ -17,6 +17,8 @@ class Limits:
     accel_ms2: float = 2.5
     climb_ms: float = 2.5
     descent_ms: float = 1.5
+    pilot_climb_ms: float | None = None  # throttle stick at full (copter PILOT_SPEED_UP); None: climb_ms
+    pilot_descent_ms: float | None = None  # ...and at zero (PILOT_SPEED_DN); None: descent_ms
     land_speed_ms: float = 0.5  # final descent, below land_alt_low_m
     land_alt_low_m: float = 10.0
     yaw_rate_dps: float = 90.0

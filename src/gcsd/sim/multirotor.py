@@ -125,9 +125,11 @@ class MultirotorDynamics:
             return lim.land_speed_ms if height < lim.land_alt_low_m else lim.descent_ms
         if kind == Kind.VELOCITY:
             return max(-lim.climb_ms, min(lim.descent_ms, sp.velocity[2]))
-        if kind == Kind.MANUAL:
+        if kind == Kind.MANUAL:  # the stick as a climb rate around mid-stick, as ALT_HOLD
             throttle = sp.sticks[2]
-            return -throttle * (lim.climb_ms if throttle > 0 else lim.descent_ms)
+            up = lim.pilot_climb_ms if lim.pilot_climb_ms is not None else lim.climb_ms
+            down = lim.pilot_descent_ms if lim.pilot_descent_ms is not None else lim.descent_ms
+            return -throttle * (up if throttle > 0 else down)
         if kind == Kind.IDLE:
             return lim.descent_ms
         error = sp.alt_m - s.alt_amsl_m  # positive: climb
