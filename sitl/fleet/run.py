@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Run a simulated fleet on one machine: a Mosquitto broker, N vehicle-side gcsd instances and
-one ground-side gcsd (QGroundControl or MAVProxy connect to UDP 14550 and see every vehicle).
+one ground-side gcsd (QGroundControl finds it through UDP 14550, MAVProxy and scripts use
+udpout:127.0.0.1:14551; both see every vehicle).
 
     python sitl/fleet/run.py                          # broker + 2 x 50 copters + ground side
     python sitl/fleet/run.py --instances 4 --per-instance 60
@@ -59,11 +60,13 @@ def instance_configs(args) -> list[tuple[str, dict]]:
         conf = yaml.safe_load(yaml.safe_dump(vehicle))
         conf["vehicle"].update(sysid=args.first_sysid + k * args.per_instance, count=args.per_instance)
         conf["state_dir"] = str(state / f"vehicles-{conf['vehicle']['sysid']}")
-        conf["channels"][0].update(broker=args.broker, topic=args.topic)
+        [fleet] = [c for c in conf["channels"] if c["type"] == "mqtt"]
+        fleet.update(broker=args.broker, topic=args.topic)
         out.append((f"vehicles-{k + 1}", conf))
     if not args.no_ground:
         ground["state_dir"] = str(state / "ground")
-        ground["channels"][1].update(broker=args.broker, topic=args.topic)
+        [fleet] = [c for c in ground["channels"] if c["type"] == "mqtt"]
+        fleet.update(broker=args.broker, topic=args.topic)
         out.append(("ground", ground))
     return out
 
@@ -94,8 +97,8 @@ def main(argv=None) -> int:
         sysids = conf["vehicle"]["sysid"]
         print(f"started {name}: {path} (sysid {sysids}, count {conf['vehicle'].get('count', 1)})", file=sys.stderr)
     if not args.no_ground:
-        print("ground stations: connect to UDP 14550 (QGroundControl: automatic; "
-              "mavproxy.py --master=udpout:127.0.0.1:14550)", file=sys.stderr)
+        print("ground stations: QGroundControl finds the fleet by itself (broadcast to UDP 14550); "
+              "mavproxy.py --master=udpout:127.0.0.1:14551", file=sys.stderr)
     stop = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
     try:
