@@ -10,6 +10,8 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from test_autopilot import flying
 from vehicle_harness import Harness
 
+from gcsd.vehicles.motors import rover_throttle_pwm
+
 ACCEPTED = M.MAV_RESULT_ACCEPTED
 
 
@@ -97,3 +99,23 @@ def test_battery_failsafe_needs_a_battery_monitor(tmp_path):
     h.run(3)
     assert [t for t in h.texts(mark) if t.startswith("Battery 1 is low")]
     assert h.node.vehicle.mode_name(h.state.mode) == "RTL"
+
+
+def test_a_planes_throttle_output_follows_the_throttle_from_servo_min(tmp_path):
+    h = Harness(tmp_path, vehicle="plane")
+    assert outputs(h)[2] == 1000  # SERVO3_FUNCTION 70 (throttle), disarmed: SERVO3_MIN
+    assert outputs(h)[0] == 1500  # aileron at SERVO1_TRIM
+    h.set_param("SERVO3_MIN", 1100)
+    assert outputs(h)[2] == 1100
+    h.set_param("SERVO3_FUNCTION", 0)  # no longer the throttle: nothing assigned
+    assert outputs(h)[2] == 0
+
+
+def test_a_rovers_throttle_output_rests_at_trim_and_drives_towards_max(tmp_path):
+    h = Harness(tmp_path, vehicle="rover")
+    assert outputs(h)[2] == 1500  # SERVO3 throttle: centred for reverse
+    assert h.arm() == ACCEPTED
+    h.node.state.throttle_pct = 50  # as the simulation sets it while driving
+    assert rover_throttle_pwm(h.node, 3) == 1750  # 1500 + (2000 - 1500) x 0.5
+    h.set_param("SERVO3_REVERSED", 1)
+    assert rover_throttle_pwm(h.node, 3) == 1250

@@ -65,7 +65,7 @@ class VehicleType:
     param_set: str = ""
     firmware: str = ""  # the banner's firmware name (ArduCopter...); "" for a companion computer
     banner_lines: Callable[[Callable[[str], float]], list[str]] = lambda get: []
-    motor_pwm: Callable | None = None  # (node, n) -> PWM of output n if it drives a motor (copter)
+    motor_pwm: Callable | None = None  # (node, n) -> PWM of output n if it drives a motor or throttle
     settings: Callable[[Callable[[str], float]], Settings] = lambda get: Settings()
     prearm_checks: tuple[Callable, ...] = ()
     not_produced: frozenset[int] = frozenset()  # message ids this vehicle never sends

@@ -1,4 +1,6 @@
-"""A multicopter's motor outputs as ArduPilot's AP_MotorsMulticopter writes them.
+"""Motor and throttle outputs of SERVO_OUTPUT_RAW as ArduPilot writes them.
+
+A multicopter (AP_MotorsMulticopter):
 
 FRAME_CLASS decides how many motors the frame has (gcsd.vehicles.firmware.FRAME_CLASSES: QUAD 4,
 HEXA 6, OCTA 8, Y6 6, TRI 3, ...). Output n drives motor m when SERVOn_FUNCTION is Motor m (33..40,
@@ -7,6 +9,10 @@ default channels of a new frame at its next start). A motor function the frame d
 outputs 0. The PWM range is MOT_PWM_MIN..MOT_PWM_MAX (0: RC3_MIN..RC3_MAX, as
 get_pwm_output_min/max): disarmed the minimum; armed on the ground MOT_SPIN_ARM of the range
 (ground idle); in the air MOT_SPIN_MIN..MOT_SPIN_MAX scaled by the simulated throttle.
+
+A plane or a rover: an output whose SERVOn_FUNCTION is Throttle (70, or 73/74 left/right) follows
+the simulated throttle from SERVOn_MIN (plane; disarmed: MIN) or from SERVOn_TRIM (rover, whose
+throttle is centred for reverse; disarmed: TRIM) to SERVOn_MAX, reversed with SERVOn_REVERSED.
 """
 
 from __future__ import annotations
@@ -50,3 +56,26 @@ def copter_motor_pwm(node, n: int) -> int | None:
     else:
         thrust = get("MOT_SPIN_MIN") + (get("MOT_SPIN_MAX") - get("MOT_SPIN_MIN")) * throttle
     return int(lo + (hi - lo) * thrust)
+
+
+THROTTLE_FUNCTIONS = frozenset({70, 73, 74})
+
+
+def _throttle_pwm(node, n: int, centred: bool) -> int | None:
+    get = node.params.get
+    if int(get(f"SERVO{n}_FUNCTION")) not in THROTTLE_FUNCTIONS:
+        return None
+    lo, hi = get(f"SERVO{n}_MIN"), get(f"SERVO{n}_MAX")
+    start = get(f"SERVO{n}_TRIM") if centred else lo
+    throttle = max(0.0, min(1.0, node.state.throttle_pct / 100.0)) if node.state.armed else 0.0
+    if get(f"SERVO{n}_REVERSED"):
+        return int(start - (start - lo) * throttle) if centred else int(hi - (hi - lo) * throttle)
+    return int(start + (hi - start) * throttle)
+
+
+def plane_throttle_pwm(node, n: int) -> int | None:
+    return _throttle_pwm(node, n, centred=False)
+
+
+def rover_throttle_pwm(node, n: int) -> int | None:
+    return _throttle_pwm(node, n, centred=True)

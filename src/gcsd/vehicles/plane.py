@@ -14,7 +14,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from ..autopilot.settings import DISARM, Settings
 from ..autopilot.settings import Behaviour as B
 from ..sim import FixedWingDynamics, Limits
-from . import commands, common, prearm
+from . import commands, common, motors, prearm
 from .base import VehicleType, modes_named, stream_rates
 from .modes import mode_mapping
 
@@ -65,6 +65,7 @@ def settings(get) -> Settings:
 PLANE = VehicleType(
     name="plane",
     firmware="ArduPlane",
+    motor_pwm=motors.plane_throttle_pwm,
     mav_type=M.MAV_TYPE_FIXED_WING,
     modes=_modes,
     initial_mode=_by_name["MANUAL"],

@@ -12,7 +12,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from ..autopilot.settings import DISARM, Settings
 from ..autopilot.settings import Behaviour as B
 from ..sim import GroundDynamics, Limits
-from . import commands, common, prearm
+from . import commands, common, motors, prearm
 from .base import VehicleType, modes_named, stream_rates
 from .modes import mode_mapping
 
@@ -57,6 +57,7 @@ def settings(get) -> Settings:
 ROVER = VehicleType(
     name="rover",
     firmware="ArduRover",
+    motor_pwm=motors.rover_throttle_pwm,
     mav_type=M.MAV_TYPE_GROUND_ROVER,
     modes=_modes,
     initial_mode=_by_name["MANUAL"],
