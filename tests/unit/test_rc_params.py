@@ -241,3 +241,16 @@ def test_the_throttle_stick_climbs_at_pilot_speed_up_and_descends_at_pilot_speed
     override(h, ch3=1000)
     h.run(2.0)
     assert h.state.vd_ms == pytest.approx(1.5, abs=0.1)
+
+
+def test_land_descends_at_land_speed_high_above_land_alt_low(tmp_path):
+    h = flying(tmp_path, alt=30.0)
+    h.mode("LAND")
+    h.run(2.0)
+    assert h.state.vd_ms == pytest.approx(1.5, abs=0.1)  # LAND_SPEED_HIGH 0: WPNAV_SPEED_DN 150 cm/s
+    h.set_param("LAND_SPEED_HIGH", 300)
+    h.run(1.0)
+    assert h.state.vd_ms == pytest.approx(3.0, abs=0.1)
+    h.run(30.0, until=lambda: h.state.relative_alt_m < 8.0)
+    h.run(1.0)
+    assert h.state.vd_ms == pytest.approx(0.5, abs=0.05)  # below LAND_ALT_LOW 10 m: LAND_SPEED 50 cm/s

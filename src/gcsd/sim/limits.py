@@ -21,6 +21,7 @@ class Limits:
     pilot_descent_ms: float | None = None  # ...and at zero (PILOT_SPEED_DN); None: descent_ms
     land_speed_ms: float = 0.5  # final descent, below land_alt_low_m
     land_alt_low_m: float = 10.0
+    land_high_ms: float | None = None  # LAND above land_alt_low_m (copter LAND_SPEED_HIGH); None: descent_ms
     yaw_rate_dps: float = 90.0
     angle_max_deg: float = 30.0  # lean (copter) or bank (plane) limit
     wp_radius_m: float = 2.0  # a waypoint is reached within this distance

@@ -122,7 +122,8 @@ class MultirotorDynamics:
         kind = sp.kind
         if kind == Kind.LAND:
             height = s.alt_amsl_m - ground
-            return lim.land_speed_ms if height < lim.land_alt_low_m else lim.descent_ms
+            high = lim.land_high_ms if lim.land_high_ms is not None else lim.descent_ms
+            return lim.land_speed_ms if height < lim.land_alt_low_m else high
         if kind == Kind.VELOCITY:
             return max(-lim.climb_ms, min(lim.descent_ms, sp.velocity[2]))
         if kind == Kind.MANUAL:  # the stick as a climb rate around mid-stick, as ALT_HOLD

@@ -24,7 +24,7 @@ PARAMS = (
     "WPNAV_SPEED", "WPNAV_SPEED_UP", "WPNAV_SPEED_DN", "WPNAV_RADIUS", "WPNAV_ACCEL", "RTL_ALT", "RTL_ALT_FINAL",
     "RTL_SPEED", "RTL_LOIT_TIME", "LAND_SPEED", "LAND_ALT_LOW", "LOIT_SPEED", "ANGLE_MAX", "ATC_SLEW_YAW",
     "CIRCLE_RADIUS", "CIRCLE_RATE", "GUID_TIMEOUT", "MOT_THST_HOVER", "FS_GCS_ENABLE", "FS_GCS_TIMEOUT",
-    "DISARM_DELAY", "FS_THR_ENABLE", "PILOT_SPEED_UP", "PILOT_SPEED_DN",
+    "DISARM_DELAY", "FS_THR_ENABLE", "PILOT_SPEED_UP", "PILOT_SPEED_DN", "LAND_SPEED_HIGH",
 ) + common.FAILSAFE_PARAMS
 
 GCS_ACTIONS = {1: "RTL", 2: "RTL", 3: "RTL", 4: "RTL", 5: "LAND", 6: "LAND", 7: "LAND"}
@@ -44,6 +44,7 @@ def settings(get) -> Settings:
         angle_max_deg=min(max(cm("ANGLE_MAX"), 5.0), 80.0), wp_radius_m=cm("WPNAV_RADIUS"),
         hover_throttle=float(get("MOT_THST_HOVER")), cruise_current_a=15.0,
         pilot_climb_ms=cm("PILOT_SPEED_UP"), pilot_descent_ms=cm("PILOT_SPEED_DN") or cm("PILOT_SPEED_UP"),
+        land_high_ms=cm("LAND_SPEED_HIGH") or cm("WPNAV_SPEED_DN"),  # 0: WPNAV_SPEED_DN, as ArduCopter
     )
     return Settings(
         limits=limits, rtl_alt_m=cm("RTL_ALT") if get("RTL_ALT") > 0 else -1.0,
