@@ -119,3 +119,25 @@ def test_a_rovers_throttle_output_rests_at_trim_and_drives_towards_max(tmp_path)
     assert rover_throttle_pwm(h.node, 3) == 1750  # 1500 + (2000 - 1500) x 0.5
     h.set_param("SERVO3_REVERSED", 1)
     assert rover_throttle_pwm(h.node, 3) == 1250
+
+
+def test_a_low_voltage_must_last_batt_low_timer_seconds(tmp_path):
+    h = flying(tmp_path)
+    h.set_param("BATT_FS_LOW_ACT", 2)  # RTL
+    volts = h.state.battery_voltage_v
+    h.set_param("BATT_LOW_VOLT", round(volts + 1.0, 1))  # below it from now on
+    mark = h.mark()
+    h.run(8.0)
+    assert not [t for t in h.texts(mark) if t.startswith("Battery 1 is low")]  # BATT_LOW_TIMER 10 s
+    h.run(3.0)
+    assert [t for t in h.texts(mark) if t.startswith("Battery 1 is low")]
+    assert h.node.vehicle.mode_name(h.state.mode) == "RTL"
+
+
+def test_batt_low_timer_0_acts_on_the_first_low_reading(tmp_path):
+    h = flying(tmp_path)
+    h.set_param("BATT_LOW_TIMER", 0)
+    h.set_param("BATT_LOW_VOLT", round(h.state.battery_voltage_v + 1.0, 1))
+    mark = h.mark()
+    h.run(0.5)
+    assert [t for t in h.texts(mark) if t.startswith("Battery 1 is low")]

@@ -7,9 +7,10 @@ condition starts and is reported cleared when it ends, as ArduPilot's do:
 - GCS: armed, the ground station (SYSID_MYGCS) has been heard at least once, and nothing for
   `gcs_timeout_s` of real time (the link runs in real time whatever the speedup). On the
   ground the action is DISARM. Cleared when its heartbeat returns.
-- Battery: voltage below BATT_LOW_VOLT / BATT_CRT_VOLT or remaining below BATT_LOW_MAH /
-  BATT_CRT_MAH (0 disables each), while armed; critical supersedes low; never cleared until
-  disarmed (a battery does not recover).
+- Battery: voltage below BATT_LOW_VOLT / BATT_CRT_VOLT for BATT_LOW_TIMER seconds (simulated
+  time; ArduPilot's AP_BattMonitor filters a sagging voltage the same way) or remaining below
+  BATT_LOW_MAH / BATT_CRT_MAH at once (0 disables each), while armed; critical supersedes low;
+  never cleared until disarmed (a battery does not recover).
 - Fence: armed, enabled, outside (gcsd.autopilot.fence); breach count and time kept for
   FENCE_STATUS in the state.
 - Radio (RC): `rc_lost` (gcsd.vehicles.rc: overrides lapsed after being used, or throttle
@@ -41,12 +42,14 @@ class Failsafes:
         self.battery_level = 0  # 0 ok, 1 low, 2 critical
         self.fence_breached: set[int] = set()
         self.radio_lost = False
+        self._volts_low_since: dict[str, float] = {}  # "low" / "critical" -> simulated time
 
     def check(self, s, settings: Settings, params, gcs_last_seen_s: float | None, now: float,
               fence_items, sim_time_ms: int, rc_lost: bool = False) -> list[Event]:
         events: list[Event] = []
         if not s.armed:
             self.battery_level = 0
+            self._volts_low_since = {}
             self.fence_breached = set()
         events += self._gcs(s, settings, gcs_last_seen_s, now)
         events += self._radio(s, settings, rc_lost)
@@ -90,9 +93,18 @@ class Failsafes:
             return []  # no battery monitor: nothing to fail
         get = params.get
         volts, left = s.battery_voltage_v, s.capacity_mah - s.consumed_mah
-        critical = (0 < get("BATT_CRT_VOLT") and volts < get("BATT_CRT_VOLT")) or \
+        timer_s = float(get("BATT_LOW_TIMER")) if "BATT_LOW_TIMER" in params else 0.0
+
+        def volts_below(level: str, limit: float) -> bool:  # held for BATT_LOW_TIMER
+            if not (0 < limit and volts < limit):
+                self._volts_low_since.pop(level, None)
+                return False
+            since = self._volts_low_since.setdefault(level, s.time_s)
+            return s.time_s - since >= timer_s
+
+        critical = volts_below("critical", get("BATT_CRT_VOLT")) or \
             (0 < get("BATT_CRT_MAH") and left < get("BATT_CRT_MAH"))
-        low = (0 < get("BATT_LOW_VOLT") and volts < get("BATT_LOW_VOLT")) or \
+        low = volts_below("low", get("BATT_LOW_VOLT")) or \
             (0 < get("BATT_LOW_MAH") and left < get("BATT_LOW_MAH"))
         level = 2 if critical else (1 if low else 0)
         if level <= self.battery_level:
