@@ -254,3 +254,22 @@ def test_land_descends_at_land_speed_high_above_land_alt_low(tmp_path):
     h.run(30.0, until=lambda: h.state.relative_alt_m < 8.0)
     h.run(1.0)
     assert h.state.vd_ms == pytest.approx(0.5, abs=0.05)  # below LAND_ALT_LOW 10 m: LAND_SPEED 50 cm/s
+
+
+def _fly_east(h: Harness) -> float:
+    from gcsd.sim.geo import offset
+    s = h.state
+    lat, lon = offset(s.lat, s.lon, 0.0, 80.0)
+    h.node.sim.goto(lat, lon, s.alt_amsl_m)
+    h.run(6.0)
+    return h.state.heading_deg
+
+
+def test_wp_yaw_behavior_0_keeps_the_heading_and_1_faces_the_way(tmp_path):
+    h = flying(tmp_path)
+    h.set_param("WP_YAW_BEHAVIOR", 0)
+    before = h.state.heading_deg
+    assert _fly_east(h) == pytest.approx(before, abs=1.0)
+    h2 = flying(tmp_path / "b")
+    h2.set_param("WP_YAW_BEHAVIOR", 1)
+    assert _fly_east(h2) == pytest.approx(90.0, abs=10.0)

@@ -19,6 +19,7 @@ behaviours, limits and failsafe actions come from the vehicle type's data.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import structlog
@@ -146,6 +147,8 @@ class Autopilot(Actions):
                 sp.yaw_deg = self.yaw_target
             elif self.roi is not None:
                 sp.yaw_deg = bearing_deg(s.lat, s.lon, self.roi[0], self.roi[1])
+        if sp.yaw_deg is None and self.behaviour in self.settings.keep_yaw_in:  # WP_YAW_BEHAVIOR
+            sp = dataclasses.replace(sp, yaw_deg=s.heading_deg)
         sp.reverse = self.reversed
         self.outputs.tick(dt)
         self.backend.update(s, sp, self.limits, dt)

@@ -58,4 +58,5 @@ class Settings:
     accept_radius_m: float | None = None  # default waypoint acceptance; None: limits.wp_radius_m
     ignore_alt_for_waypoints: bool = False  # rovers and trackers: only the horizontal distance counts
     track_sysid: int = 0  # tracker: whose GLOBAL_POSITION_INT to follow (0: the first one heard)
+    keep_yaw_in: frozenset = frozenset()  # behaviours that keep their heading (WP_YAW_BEHAVIOR)
     extra: dict = field(default_factory=dict)

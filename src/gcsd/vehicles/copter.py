@@ -24,7 +24,7 @@ PARAMS = (
     "WPNAV_SPEED", "WPNAV_SPEED_UP", "WPNAV_SPEED_DN", "WPNAV_RADIUS", "WPNAV_ACCEL", "RTL_ALT", "RTL_ALT_FINAL",
     "RTL_SPEED", "RTL_LOIT_TIME", "LAND_SPEED", "LAND_ALT_LOW", "LOIT_SPEED", "ANGLE_MAX", "ATC_SLEW_YAW",
     "CIRCLE_RADIUS", "CIRCLE_RATE", "GUID_TIMEOUT", "MOT_THST_HOVER", "FS_GCS_ENABLE", "FS_GCS_TIMEOUT",
-    "DISARM_DELAY", "FS_THR_ENABLE", "PILOT_SPEED_UP", "PILOT_SPEED_DN", "LAND_SPEED_HIGH",
+    "DISARM_DELAY", "FS_THR_ENABLE", "PILOT_SPEED_UP", "PILOT_SPEED_DN", "LAND_SPEED_HIGH", "WP_YAW_BEHAVIOR",
 ) + common.FAILSAFE_PARAMS
 
 GCS_ACTIONS = {1: "RTL", 2: "RTL", 3: "RTL", 4: "RTL", 5: "LAND", 6: "LAND", 7: "LAND"}
@@ -32,6 +32,9 @@ BATTERY_ACTIONS = {1: "LAND", 2: "RTL", 3: "RTL", 4: "RTL", 5: DISARM}
 # FS_THR_ENABLE: 1 RTL, 2 RTL (removed in 4.0: ArduPilot treats it as 1), 3 LAND,
 # 4 SmartRTL or RTL, 5 SmartRTL or LAND, 6 DO_LAND_START or RTL, 7 BRAKE then LAND
 RADIO_ACTIONS = {1: "RTL", 2: "RTL", 3: "LAND", 4: "SMART_RTL", 5: "SMART_RTL", 6: "RTL", 7: "LAND"}
+# WP_YAW_BEHAVIOR: 0 never change yaw, 1 face the next waypoint, 2 ... except in RTL, 3 face along
+# the course (gcsd: as 1): the behaviours that keep their heading
+KEEP_YAW = {0: frozenset({B.AUTO, B.GUIDED, B.RTL}), 2: frozenset({B.RTL})}
 FENCE_ACTIONS = {1: "RTL", 2: "LAND", 3: "RTL", 4: "BRAKE", 5: "RTL", 6: "LAND", 7: "LAND"}
 
 
@@ -57,6 +60,7 @@ def settings(get) -> Settings:
         fence_action=common.action(FENCE_ACTIONS, get("FENCE_ACTION")),
         guided_timeout_s=float(get("GUID_TIMEOUT")), circle_radius_m=cm("CIRCLE_RADIUS"),
         circle_rate_dps=float(get("CIRCLE_RATE")), extra={"disarm_delay_s": float(get("DISARM_DELAY"))},
+        keep_yaw_in=KEEP_YAW.get(int(get("WP_YAW_BEHAVIOR")), frozenset()),
     )
 
 
