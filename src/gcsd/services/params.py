@@ -3,13 +3,14 @@
 - PARAM_REQUEST_LIST starts (or restarts) a list download for the requester, keyed by
   (sysid, compid, channel): two ground stations downloading at once each get every index. The
   banner STATUSTEXTs go first. Values are then streamed by `pending()` in the channel's send
-  pass: as many per pass as the byte budget allows, at most BURST per pass and one full burst
-  per BURST_INTERVAL_S (2 500 values a second: ArduCopter's 1 000 in 0.4 s), so a 57600-baud
-  radio is never flooded and a ground station reading a UDP socket with the kernel's default
-  buffer keeps up: each PARAM_VALUE is one datagram, and a default 208 KiB receive buffer holds
-  only ~270 of them (pymavlink lost 700 of 1 000 sent at full speed to a busy client). ArduPilot
-  paces its list the same way (queued_param_send: at most 5 values per loop without flow
-  control, ~2 000 a second; SITL served 1 354 in 0.70 s).
+  pass: as many per pass as the byte budget allows and at most BURST per pass, so a 57600-baud
+  radio is never flooded. A datagram link (UDP, MQTT) has no flow control: there one full burst
+  goes per BURST_INTERVAL_S (3 000 values a second: ArduCopter's 1 000 in 0.33 s), so a ground
+  station reading its socket with the kernel's default buffer keeps up: each PARAM_VALUE is one
+  datagram, a default 208 KiB receive buffer holds only ~270 of them, and a busy pymavlink
+  client lost 700 of 1 000 sent at full speed. ArduPilot paces the same way: queued_param_send
+  sends at most 5 values per loop when the link has no flow control (~2 000 a second; SITL
+  served 1 354 in 0.70 s). A stream link (TCP, serial) goes as fast as its budget allows.
   While a list streams, the link's telemetry is slowed x4.
 - PARAM_REQUEST_READ by index (index >= 0) or by name (index -1) is answered at once on the
   requesting link; an unknown name or index gets no reply (as ArduPilot).
@@ -53,8 +54,9 @@ from . import Incoming, Service
 
 log = structlog.get_logger("gcsd.params")
 
-BURST = 25  # PARAM_VALUEs per send pass on a link with room to spare
-BURST_INTERVAL_S = 0.01  # ...and at most one full burst per 10 ms
+BURST = 30  # PARAM_VALUEs per send pass on a link with room to spare
+BURST_INTERVAL_S = 0.01  # ...and, on a datagram link, at most one full burst per 10 ms
+DATAGRAM_TYPES = frozenset({"udp-server", "udp-client", "mqtt"})
 PARAM_VALUE_BYTES = 37  # MAVLink2 PARAM_VALUE: 12 bytes of framing + 25 of payload
 PERSIST_INTERVAL_S = 1.0  # at most one write of mav.parm per second
 
@@ -221,7 +223,8 @@ class ParamService(Service):
         if not any(k[2] == channel.index for k in self._lists):
             self.node.link(channel).set_slow("params", False)
             return None
-        return now + BURST_INTERVAL_S if sent >= BURST else now
+        paced = sent >= BURST and channel.config.type in DATAGRAM_TYPES
+        return now + BURST_INTERVAL_S if paced else now
 
 
 def params_file_problems(store: ParamStore, path: Path) -> list[str]:
