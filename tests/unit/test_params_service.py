@@ -21,8 +21,10 @@ GCS = (255, 190)
 
 
 class FakeChannel:
-    def __init__(self, index: int, room_bytes: float = math.inf, private: bool = False) -> None:
+    def __init__(self, index: int, room_bytes: float = math.inf, private: bool = False,
+                 kind: str = "udp-server") -> None:
         self.index = index
+        self.config = SimpleNamespace(type=kind)  # a datagram link: the list is paced there
         self.peers = {"peer": object()}
         self.policy = SimpleNamespace(private=private)
         self.room_bytes = room_bytes
@@ -254,6 +256,15 @@ def test_list_sends_the_banner_slows_telemetry_and_streams_burst_per_pass(svc):
     assert [m.param_index for m in sent] == list(range(len(svc.store)))
     assert now == 1.0 + (len(svc.store) // BURST) * BURST_INTERVAL_S
     assert svc.node.slow == [(0, True), (0, False)]
+
+
+def test_a_stream_link_has_flow_control_so_its_list_is_not_paced(svc):
+    ch0 = svc.node.channels[0]
+    ch0.config = SimpleNamespace(type="tcp-server")
+    request_list(svc, ch0)
+    sent = []
+    assert svc.pending(ch0, 1.0, lambda m: sent.append(m) or True) == 1.0  # at once again
+    assert len(sent) == BURST
 
 
 def test_list_on_a_spent_budget_comes_back_when_the_budget_allows(svc):
