@@ -39,7 +39,7 @@ class RunningDaemon:
             self._stop = asyncio.Event()
             self.gcs = GCS(self.config, backend=self.backend)
             runner = asyncio.create_task(self.gcs.run(self._stop))
-            await self.gcs.all_open.wait()
+            await self.gcs.ready.wait()
             self._ready.set()
             await runner
 

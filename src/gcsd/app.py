@@ -5,7 +5,7 @@ stopping exits at once. Returns the process exit code: 0 clean stop, 1 failure, 
 configuration found before anything started: preflight.prepare (state_dir, FTP roots,
 params_file, tlog) or a ConfigError while the vehicles are built (a bad params_file line); each
 problem is one ``FILE:LINE: key.path: what`` line on stderr, as check-config prints them.
-Once every channel is open the daemon registers its control socket (control.register) so that
+Once it is ready (every server channel bound, every client channel tried once) the daemon registers its control socket (control.register) so that
 `gcsd status` finds it from any directory; the registration is removed at the stop.
 """
 
@@ -71,12 +71,13 @@ async def run_daemon(config: Config) -> int:
 
 
 async def _run_with_notify(gcs: GCS, stop: asyncio.Event, notifier: Notifier) -> None:
-    """Run the GCS; tell systemd when every channel is open, and ping its watchdog from the loop."""
+    """Run the GCS; tell systemd when it is ready (servers bound, clients tried), and ping its watchdog
+    from the loop."""
 
     async def tell_systemd() -> None:
-        await gcs.all_open.wait()
+        await gcs.ready.wait()
         registration.append(control.register(gcs.config))
-        notifier.ready(f"{len(gcs.channels)} channels open")
+        notifier.ready(f"{len(gcs.opened)} of {len(gcs.channels)} channels open")
         log.info("daemon_ready", channels=len(gcs.channels), notify=notifier.enabled)
         interval = notifier.watchdog_interval_s
         while interval:

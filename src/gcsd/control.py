@@ -9,7 +9,7 @@ changed through this socket.
 Finding a daemon (the rule `gcsd status` follows; relative paths in a configuration are relative
 to the daemon's working directory, so the socket's path depends on where it was started):
 
-1. Once its channels are open, a daemon registers: `<pid>.json` in its runtime directory,
+1. Once it is ready (servers bound, clients tried), a daemon registers: `<pid>.json` in its runtime directory,
    `$XDG_RUNTIME_DIR/gcsd/` or, without that variable, `/tmp/gcsd-<uid>/` (created 0700; a
    directory not owned by the user or open to others is ignored). The entry holds the
    absolute socket path, the absolute configuration file (null for the built-in default),

@@ -71,13 +71,14 @@ def build(config: Config, backend: Backends) -> GCS:
 
 async def serve(config: Config, backend: Backends, stop: asyncio.Event,
                 started: Callable[[GCS], None] | None = None) -> None:
-    """Serve until `stop` is set; `started(gcs)` is called once every channel is open (the GCS
-    object then gives the real ports: `gcs.channels[i].local_address`)."""
+    """Serve until `stop` is set; `started(gcs)` is called once it is ready, every server channel
+    bound and every client channel tried (the GCS object then gives the real ports:
+    `gcs.channels[i].local_address`)."""
     config.state_dir.mkdir(parents=True, exist_ok=True)
     gcs = build(config, backend)
     runner = asyncio.create_task(gcs.run(stop))
     if started is not None:
-        opened = asyncio.create_task(gcs.all_open.wait())
+        opened = asyncio.create_task(gcs.ready.wait())
         await asyncio.wait({runner, opened}, return_when=asyncio.FIRST_COMPLETED)
         if opened.done():
             started(gcs)

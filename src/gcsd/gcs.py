@@ -60,8 +60,9 @@ class GCS:
         self.channels = [Channel(i, c, now) for i, c in enumerate(config.channels)]
         self._wakeups = [asyncio.Event() for _ in self.channels]
         self.active: set[int] = set()
-        self.opened: set[int] = set()
-        self.all_open = asyncio.Event()
+        self.opened: set[int] = set()  # channels open at least once
+        self._tried: set[int] = set()  # channels opened or, for a client, tried once
+        self.ready = asyncio.Event()  # every server channel bound, every client channel tried
         vtype = vehicle_type(config.vehicle.type)
         # per channel, when each node next needs a send pass (0: now)
         self._node_due = [[0.0] * config.vehicle.count for _ in self.channels]
@@ -194,10 +195,12 @@ class GCS:
         return deadline
 
     # --- run -------------------------------------------------------------------------------
-    def _opened(self, channel: Channel) -> None:
-        self.opened.add(channel.index)
-        if len(self.opened) == len(self.channels):
-            self.all_open.set()
+    def _opened(self, channel: Channel, ok: bool) -> None:
+        if ok:
+            self.opened.add(channel.index)
+        self._tried.add(channel.index)
+        if len(self._tried) == len(self.channels):
+            self.ready.set()
 
     async def run(self, stop: asyncio.Event) -> None:
         """Serve every channel until `stop` is set."""

@@ -1,5 +1,5 @@
-"""systemd's notify protocol, without a dependency: READY=1 once every channel is open,
-WATCHDOG=1 from the event loop at half the watchdog interval (a stuck loop stops the pings and
+"""systemd's notify protocol, without a dependency: READY=1 once every server channel is bound
+and every client channel tried, WATCHDOG=1 from the event loop at half the watchdog interval (a stuck loop stops the pings and
 systemd restarts the service), STOPPING=1 on a clean stop. Does nothing outside systemd."""
 
 from __future__ import annotations

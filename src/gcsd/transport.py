@@ -253,10 +253,15 @@ async def run_channel(
     channel: Channel,
     send_pass: Callable[[Channel, float], float | None],
     wakeup: asyncio.Event,
-    opened: Callable[[Channel], None] = lambda channel: None,
+    opened: Callable[[Channel, bool], None] = lambda channel, ok: None,
     on_error: Callable[[str, float], None] | None = None,
 ) -> None:
     """Open, serve and reopen one channel until cancelled.
+
+    `opened(channel, True)` after each successful open; `opened(channel, False)` after the
+    first failed attempt of a client channel (a flight controller or broker that is down at
+    boot), so that the daemon is ready once every channel has been tried, not when every peer
+    happens to be up.
 
     `send_pass` guards its own parts; should it raise all the same, `on_error(component, now)`
     counts it and the loop goes on after a short pause (never a hot loop, never a dead channel).
@@ -274,13 +279,14 @@ async def run_channel(
                 raise ChannelStartError(
                     f"channel {channel.name}: cannot open {channel.config.type} {host}:{port}: {error}") from None
             log.warning("channel_open_failed", channel=channel.name, error=error, retry_s=backoff)
+            opened(channel, False)
             await asyncio.sleep(backoff)
             backoff = min(backoff * 2, BACKOFF_MAX_S)
             continue
         ever_opened = True
         backoff = BACKOFF_START_S
         log.info("channel_opened", channel=channel.name, type=channel.config.type, address=_describe(channel))
-        opened(channel)
+        opened(channel, True)
         try:
             while not closed.done():
                 now = clock()

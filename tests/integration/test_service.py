@@ -159,3 +159,36 @@ def test_tlog_records_frames_in_both_directions_readably(daemon, client, tmp_pat
         seen.add((msg.get_type(), msg.get_srcSystem()))
     assert ("HEARTBEAT", 255) in seen and ("COMMAND_LONG", 255) in seen, "frames in"
     assert ("HEARTBEAT", 1) in seen and ("COMMAND_ACK", 1) in seen, "frames out"
+
+
+def test_ready_is_not_held_back_by_a_flight_controller_that_is_down_at_boot(tmp_path):
+    dead = socket.socket()
+    dead.bind(("127.0.0.1", 0))
+    fc_port = dead.getsockname()[1]
+    dead.close()  # nothing listens there: the flight controller link cannot open
+    cfg = tmp_path / "companion.yaml"
+    cfg.write_text(
+        f"state_dir: {tmp_path / 'state'}\nlog: {{level: info, format: json}}\n"
+        f"channels:\n  - {{name: gcs, type: udp-server, address: '127.0.0.1:0'}}\n"
+        f"  - {{name: fc, type: tcp-client, address: '127.0.0.1:{fc_port}'}}\n"
+    )
+    notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    notify_path = tmp_path / "notify.sock"
+    notify.bind(str(notify_path))
+    notify.settimeout(5.0)
+    proc = subprocess.Popen([sys.executable, "-m", "gcsd", "run", "-c", str(cfg)],
+                            env=env_with_venv(NOTIFY_SOCKET=str(notify_path), WATCHDOG_USEC="600000"),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        start = time.monotonic()
+        first = notify.recv(4096).decode()
+        ready_s = time.monotonic() - start
+        second = notify.recv(4096).decode()
+        assert first.startswith("READY=1") and "1 of 2 channels open" in first, first
+        assert ready_s < 3.0, f"READY=1 {ready_s:.1f} s after start"
+        assert second == "WATCHDOG=1", "and the watchdog is fed"
+        assert stop(proc) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        notify.close()
