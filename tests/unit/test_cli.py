@@ -1,7 +1,6 @@
 """The command line: subcommands, exit codes and what is printed."""
 
 import json
-import logging
 import os
 import subprocess
 import sys
@@ -10,6 +9,7 @@ from pathlib import Path
 
 import pytest
 import structlog
+from logging_fixture import restore_logging  # noqa: F401  (an autouse fixture)
 
 import gcsd
 from gcsd.cli import main
@@ -48,14 +48,6 @@ def daemon(monkeypatch):
     yield app
 
 
-@pytest.fixture(autouse=True)
-def restore_logging():
-    root = logging.getLogger()
-    handlers, level = root.handlers[:], root.level
-    yield
-    structlog.reset_defaults()
-    root.handlers[:] = handlers
-    root.setLevel(level)
 
 
 # --- check-config -----------------------------------------------------------------------------------

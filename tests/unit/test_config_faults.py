@@ -5,7 +5,6 @@ opens (preflight.prepare); `gcsd check-config` finds the same ones without creat
 
 from __future__ import annotations
 
-import logging
 import os
 import random
 import subprocess
@@ -14,7 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
-import structlog
+from logging_fixture import restore_logging  # noqa: F401  (an autouse fixture)
 
 from gcsd.cli import main
 from gcsd.config import ConfigError, parse_config
@@ -23,14 +22,6 @@ REPO = Path(__file__).resolve().parents[2]
 LOOPBACK = '[{name: gcs, type: udp-server, address: "127.0.0.1:0"}]'
 
 
-@pytest.fixture(autouse=True)
-def restore_logging():
-    root = logging.getLogger()
-    handlers, level = root.handlers[:], root.level
-    yield
-    structlog.reset_defaults()
-    root.handlers[:] = handlers
-    root.setLevel(level)
 
 
 @pytest.fixture
