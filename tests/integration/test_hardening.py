@@ -23,7 +23,7 @@ from gcsd.gcs import GCS
 from gcsd.sim import Landed
 
 from .helpers import VEHICLE, Client, M, is_ack, packed, pump, udp_channel, udp_url, wait_for
-from .test_signing import KEY, arm_ack, now_units, sign, signed_daemon
+from .test_signing import KEY, answered_request, arm_ack, now_units, sign, signed_daemon
 
 TEN_YEARS_UNITS = 10 * 365 * 24 * 3600 * 100_000
 
@@ -61,9 +61,7 @@ def test_a_replay_is_refused_after_more_than_64_signed_streams_came_and_went(dae
     d = signed_daemon(daemon, tmp_path)
     station = client(udp_url(d.port("gcs")))
     sign(station, KEY)
-    mark = station.mark()
-    captured = station.command_long(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
-    assert wait_for(station, is_ack(M.MAV_CMD_REQUEST_MESSAGE), since=mark) is not None
+    captured = answered_request(station)
     for i in range(70):  # 70 new streams: more than the table holds, the station's is evicted
         other = client(udp_url(d.port("gcs")), 200, 1 + i)
         sign(other, KEY, link_id=i)

@@ -57,6 +57,14 @@ def keyholder(client, d, channel: str = "gcs") -> Client:
     return station
 
 
+def answered_request(c: Client) -> bytes:
+    """A REQUEST_MESSAGE that is answered: its exact bytes, for a replay."""
+    mark = c.mark()
+    raw = c.command_long(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+    assert wait_for(c, is_ack(M.MAV_CMD_REQUEST_MESSAGE), since=mark) is not None
+    return raw
+
+
 def signed_daemon(daemon, tmp_path, **channel):
     return daemon({
         "state_dir": str(tmp_path / "st"),
@@ -122,9 +130,7 @@ def test_replayed_packet_is_dropped(daemon, client, tmp_path):
     d = signed_daemon(daemon, tmp_path)
     c = client(udp_url(d.port("gcs")))
     sign(c, KEY)
-    mark = c.mark()
-    raw = c.command_long(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
-    assert wait_for(c, is_ack(M.MAV_CMD_REQUEST_MESSAGE), since=mark)
+    raw = answered_request(c)
     mark = c.mark()
     c.write(raw)
     c.command_long(M.MAV_CMD_GET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_ATTITUDE)  # fresh, just after: answered
