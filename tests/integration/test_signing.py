@@ -7,7 +7,7 @@ import time
 
 from gcsd.signing import EPOCH_2015_S, UNITS_PER_S
 
-from .helpers import M, Client, is_ack, pump, udp_channel, udp_url, wait_for
+from .helpers import Client, M, is_ack, pump, udp_channel, udp_url, wait_for
 
 KEY = hashlib.sha256(b"correct horse battery staple").digest()
 OTHER_KEY = hashlib.sha256(b"wrong").digest()
