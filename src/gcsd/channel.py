@@ -42,6 +42,8 @@ from typing import Protocol
 
 from .codec import Encoder, Frame, FrameParser, MAVLink_message, ParseStats
 from .config import ChannelConfig
+from .filters import counters as gate_counters
+from .filters import gates
 from .router import MSG_ID_RADIO, MSG_ID_RADIO_STATUS, ChannelPolicy
 
 MAX_FRAME_BYTES = 280
@@ -159,6 +161,8 @@ class Channel:
         # a high-latency link is silent until CONTROL_HIGH_LATENCY enables it (REFERENCE.md 11)
         self.output_enabled = "high_latency" not in config.options
         self.muted_frames = 0
+        # companion routing (filters.py): None when the channel has no filter / no rate cap
+        self.in_gate, self.out_gate = gates(config)
 
     # --- peers -----------------------------------------------------------------------------
     @property
@@ -252,7 +256,7 @@ class Channel:
             if peer.admitted:  # never relay what an unknown source sent
                 for raw in bad:
                     self.on_bad_crc(self, raw)
-        verify, on_frame, tlog = self.verify, self.on_frame, self.tlog
+        verify, on_frame, tlog, in_gate = self.verify, self.on_frame, self.tlog, self.in_gate
         for frame in frames:
             if tlog is not None:
                 tlog.record(frame.raw, self.wall())
@@ -268,6 +272,8 @@ class Channel:
                     self._set_version(peer, frame.version == 1)
                 if not peer.admitted:
                     self._admit(peer)
+            if in_gate is not None and not in_gate.allow(frame):
+                continue  # filter.in: after the signature check, before routing and local handling
             on_frame(self, frame, now)
 
     # --- send ------------------------------------------------------------------------------
@@ -288,7 +294,11 @@ class Channel:
         return 0.0 if self.budget is None else self.budget.wait_s(nbytes, self.clock())
 
     def write(self, raw: bytes) -> bool:
-        """Send raw bytes to every peer, if the budget allows; False (and a counted drop) if not."""
+        """Send raw bytes to every peer, if the budget allows; False (and a counted drop) if not.
+        filter.out or a rate cap may hold it back (counted by the gate; not a failure of the link)."""
+        gate = self.out_gate
+        if gate is not None and self.peers and not gate.allow(raw, self.clock()):
+            return True
         return self._write(raw, None)
 
     def _write(self, raw: bytes, mavlink1: bool | None) -> bool:
@@ -321,6 +331,9 @@ class Channel:
         peers = len(self.peers)
         if not peers:
             return True
+        gate = self.out_gate  # once per message, whatever number of versions it is encoded in
+        if gate is not None and not gate.allow_header(msg.get_msgId(), sysid, compid, self.clock()):
+            return True
         v1 = self._v1_peers
         if v1 == 0:
             return self._send_as(msg, sysid, compid, False, None)
@@ -351,6 +364,7 @@ class Channel:
         out["packets_in"] -= self._rejected_frames
         out["bytes_in"] -= self._rejected_bytes
         out["peers"] = len(self.peers)
+        out.update(gate_counters(self.in_gate, self.out_gate))
         for reason, n in self.signature_reject_reasons.items():
             out[f"signature_rejects_{reason}"] = n
         return out

@@ -38,6 +38,14 @@ from types import MappingProxyType
 import yaml
 from yaml.nodes import MappingNode, SequenceNode
 
+from .config_companion import (
+    COMPANION_KEYS,
+    ChannelFilter,
+    RoutingConfig,
+    read_bauds,
+    read_companion,
+    read_routing,
+)
 from .config_mqtt import MQTT_KEYS, MqttConfig, read_mqtt
 from .config_reader import Field, Reader, Section, describe, is_null, line_of
 
@@ -47,7 +55,8 @@ DEFAULT_STREAM_RATES_HZ = {"raw_sens": 2, "ext_stat": 2, "rc_chan": 5, "raw_ctrl
                            "extra1": 5, "extra2": 5, "extra3": 2, "params": 10, "adsb": 0}
 VEHICLE_TYPES = ("copter", "plane", "rover", "sub", "tracker", "blimp", "companion")
 CHANNEL_TYPES = ("udp-server", "udp-client", "tcp-server", "tcp-client", "serial", "mqtt")
-CHANNEL_OPTIONS = ("no_forward", "no_stream_override", "unsigned_ok", "forward_bad_crc", "high_latency")
+CHANNEL_OPTIONS = ("no_forward", "no_stream_override", "unsigned_ok", "forward_bad_crc", "high_latency",
+                   "sign_forwarded")
 LOG_LEVELS = ("debug", "info", "warning", "error")
 LOG_FORMATS = ("console", "json")
 
@@ -129,8 +138,17 @@ class ChannelConfig:
     max_peers: int = DEFAULT_MAX_PEERS  # udp-server/tcp-server: ground stations served at once
     broadcast: bool = False  # udp-client: send to the (broadcast) address until a station answers (discovery.py)
     mqtt: MqttConfig | None = None  # type mqtt: broker, topic, role, ... (config_mqtt.py)
+    # companion routing (config_companion.py)
+    bauds: tuple[int, ...] = ()  # serial: the bauds tried in turn until a good frame; () is (baud,)
+    group: str | None = None  # channels of one group are redundant links to the same systems
+    filter: ChannelFilter = field(default_factory=ChannelFilter)
+    rate_limits: Mapping[int, float] = field(default_factory=dict)  # msgid -> Hz on this channel's output
+    request_streams: float = 0.0  # Hz: REQUEST_DATA_STREAM to each autopilot learned here; 0: never
 
     def __post_init__(self) -> None:
+        if not self.bauds:
+            object.__setattr__(self, "bauds", (self.baud,))
+        object.__setattr__(self, "rate_limits", MappingProxyType(dict(self.rate_limits)))
         # Any mapping given is merged over the defaults and frozen, so streams always has all ten.
         object.__setattr__(self, "streams", MappingProxyType(
             {name: float(self.streams.get(name, DEFAULT_STREAM_RATES_HZ[name])) for name in STREAM_NAMES}))
@@ -187,6 +205,7 @@ class Config:
     )
     log: LogConfig = LogConfig()
     serial_control: tuple[SerialControlPort, ...] = ()
+    routing: RoutingConfig = field(default_factory=RoutingConfig)
     source: Source = field(default=Source(), compare=False, repr=False)
 
 
@@ -260,12 +279,12 @@ def _check_depth(text: str, filename: str) -> None:
 # --- the schema, one function per section -------------------------------------------------------
 
 _TOP_KEYS = ("vehicle", "state_dir", "params_file", "gcs", "mission", "ftp", "signing", "channels", "log",
-             "serial_control")
+             "serial_control", "routing")
 SERIAL_CONTROL_PORTS = ("telem1", "telem2", "gps1", "gps2", *(f"serial{n}" for n in range(10)))
 _VEHICLE_KEYS = ("type", "sysid", "compid", "count", "home", "speedup")
 _MISSION_KEYS = ("max_items", "max_fence", "max_rally", "retry_ms")
 _CHANNEL_KEYS = ("name", "type", "address", "device", "baud", "mavlink", "streams", "options",
-                 "private", "bandwidth", "max_peers", "broadcast", *MQTT_KEYS)
+                 "private", "bandwidth", "max_peers", "broadcast", *MQTT_KEYS, *COMPANION_KEYS)
 _NETWORK_TYPES = tuple(t for t in CHANNEL_TYPES if t not in ("serial", "mqtt"))
 _SIGNING_KEY = re.compile(f"[0-9a-fA-F]{{{SIGNING_KEY_HEX_CHARS}}}")
 _ADDRESS = re.compile(r"(?:\[(?P<ipv6>[^\]\x00-\x1f]+)\]|(?P<host>[^:\s\[\]\x00-\x1f]+)):(?P<port>[0-9]{1,5})",
@@ -294,6 +313,7 @@ def _config(r: Reader, top: Section) -> Config:
                       format=r.choice(log["format"], "console", LOG_FORMATS),
                       tlog=r.path(log["tlog"], None, nullable=True)),
         serial_control=_serial_control(r, top["serial_control"], channels),
+        routing=read_routing(r, top["routing"]),
     )
 
 
@@ -455,13 +475,17 @@ def _channel(r: Reader, c: Section) -> ChannelConfig:
     if "broadcast" in c and channel_type != "udp-client":
         r.problem(c["broadcast"], "only used by udp-client channels")
     streams = r.section(c["streams"], STREAM_NAMES)
+    options = frozenset(r.choice(o, "", CHANNEL_OPTIONS) for o in r.sequence(c["options"])) - {""}
+    bauds = read_bauds(r, c["baud"])
+    companion = read_companion(r, c, channel_type, address, options)
     return ChannelConfig(
         name=r.text(c["name"], ""), type=channel_type, address=address, device=device,
-        baud=r.integer(c["baud"], 115200, 1),
+        baud=bauds[0], bauds=bauds, group=companion.group, filter=companion.filter,
+        rate_limits=companion.rate_limits, request_streams=companion.request_streams,
         mavlink=r.integer(c["mavlink"], 2, 1, 2),
         streams={name: r.number(streams[name], float(DEFAULT_STREAM_RATES_HZ[name]), 0, MAX_STREAM_RATE_HZ)
                  for name in STREAM_NAMES},
-        options=frozenset(r.choice(o, "", CHANNEL_OPTIONS) for o in r.sequence(c["options"])) - {""},
+        options=options,
         private=r.boolean(c["private"], False),
         bandwidth=r.integer(c["bandwidth"], None, 1, nullable=True),
         max_peers=r.integer(c["max_peers"], DEFAULT_MAX_PEERS, 1, MAX_MAX_PEERS),

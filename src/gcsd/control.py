@@ -201,7 +201,8 @@ def format_status(status: dict, daemon: dict | None = None) -> str:
     ]
     problems = [
         [c["name"], c.get("parse_errors", 0), c.get("crc_errors", 0), c.get("unknown_ids", 0), c.get("seq_gaps", 0),
-         c.get("drops", 0), c.get("signature_rejects", 0), c.get("peers_forgotten", 0), c.get("peers_replaced", 0)]
+         c.get("drops", 0), c.get("signature_rejects", 0), c.get("peers_forgotten", 0), c.get("peers_replaced", 0),
+         c.get("filtered_in", 0), c.get("filtered_out", 0), c.get("rate_limited", 0), c.get("duplicates", 0)]
         for c in chans
     ]
     routes = [[r["sysid"], r["compid"], mav_type_name(r.get("mavtype")), r["channel"], f'{r["age_s"]:.1f}']
@@ -220,7 +221,8 @@ def format_status(status: dict, daemon: dict | None = None) -> str:
         "",
         _table("Channel errors and drops (counts)", ["channel", "parse", "bad CRC", "unknown id", "seq gaps",
                                                      "drops", "signing rejects", "peers expired",
-                                                     "peers replaced"], problems),
+                                                     "peers replaced", "filtered in", "filtered out",
+                                                     "rate limited", "duplicates"], problems),
         "",
         _table("Routes learned", ["sysid", "compid", "MAV_TYPE", "via channel", "last heard (s ago)"], routes),
         "",

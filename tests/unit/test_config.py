@@ -195,7 +195,7 @@ BAD_CONFIGS = [
     ("vehicle:\n  sysdi: 2\n", "gcsd.yaml:2: vehicle.sysdi: unknown key; did you mean 'sysid'?"),
     ("chanels: []\n", "gcsd.yaml:1: chanels: unknown key; did you mean 'channels'?"),
     ("colour: red\n", "gcsd.yaml:1: colour: unknown key (known keys: vehicle, state_dir, params_file, gcs, "
-                      "mission, ftp, signing, channels, log, serial_control)"),
+                      "mission, ftp, signing, channels, log, serial_control, routing)"),
     ("vehicle: {sysid: 1, sysid: 2}\n", "gcsd.yaml:1: vehicle.sysid: duplicate key"),
     ("vehicle: copter\n", "gcsd.yaml:1: vehicle: expected a mapping, got 'copter'"),
     ("vehicle: {type: coptr}\n", "gcsd.yaml:1: vehicle.type: expected copter|plane|rover|sub|tracker|blimp|"
@@ -285,7 +285,7 @@ BAD_CONFIGS = [
      "gcsd.yaml:2: channels[0].streams.extra1: expected a number 0..50, got -1"),
     ("channels:\n  - {name: fc, type: serial, device: /dev/ttyS0, options: [no_fwd]}\n",
      "gcsd.yaml:2: channels[0].options[0]: expected "
-     "no_forward|no_stream_override|unsigned_ok|forward_bad_crc|high_latency, "
+     "no_forward|no_stream_override|unsigned_ok|forward_bad_crc|high_latency|sign_forwarded, "
      "got 'no_fwd'; did you mean 'no_forward'?"),
     ("channels:\n  - {name: fc, type: serial, device: /dev/ttyS0, options: no_forward}\n",
      "gcsd.yaml:2: channels[0].options: expected a list, got 'no_forward'"),
