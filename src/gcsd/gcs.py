@@ -79,6 +79,8 @@ class GCS:
         )
         if self.signing_manager.load_error:
             log.error("signing_state_unreadable", error=self.signing_manager.load_error)
+        if self.signing_manager.load_repair:
+            log.warning("signing_timestamp_repaired", reason=self.signing_manager.load_repair)
         self.signing = self.signing_manager.signing
         for ch in self.channels:
             ch.signing = self.signing

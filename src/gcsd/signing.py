@@ -28,12 +28,23 @@ Incoming, per frame (`check`):
   there anyway, and a ground station whose key got out of step (MAVProxy switches keys even
   when a SETUP_SIGNING is refused) must not be locked out of the one link meant to fix it.
 
-Outgoing: `next_timestamp()` for each packet signed on a channel whose output is MAVLink2.
+Outgoing: `next_timestamp()` for each packet signed on a channel whose output is MAVLink2. It
+never passes MAX_TIMESTAMP (the 48-bit field's largest value), so no send can fail on it.
+
+SETUP_SIGNING (`set_key`) assigns the local timestamp as ArduPilot does (a later setup repairs a
+wrong one), checked as an incoming frame's timestamp is checked: one more than FUTURE_LIMIT_S
+ahead of the wall clock (while the wall clock is set), or past MAX_TIMESTAMP, is not taken and
+the wall clock is used instead, as a frame that far ahead would change nothing; never below the
+wall clock. A new key forgets every stream; the same key again keeps the stream table and the floor,
+so lowering the timestamp reopens no replay.
 
 Restart safety: the timestamp is saved (see SigningStore) every SAVE_INTERVAL_S and at a clean
 stop. At start the local timestamp becomes the saved one + 60 s, plus SAVE_INTERVAL_S when the
 last stop was not clean, so that no packet captured before the restart is inside the new-stream
-window: a replay across a restart is always refused.
+window: a replay across a restart is always refused. The saved timestamp also becomes the floor
+(a frame at or below it is one we may have accepted already). A saved timestamp beyond the bound
+above (written by an older version, or by a ground station's wrong clock) is repaired at load:
+the wall clock replaces it, and `load_repair` says so for the log.
 """
 
 from __future__ import annotations
@@ -50,6 +61,7 @@ UNITS_PER_S = 100_000
 WINDOW_UNITS = 60 * UNITS_PER_S
 MAX_STREAMS = 64
 SAVE_INTERVAL_S = 10.0
+MAX_TIMESTAMP = (1 << 48) - 1  # the signature's timestamp field is 48 bits
 SIG_LEN = 13  # link id 1 + timestamp 6 + signature 6
 FUTURE_LIMIT_S = 300.0
 SANE_WALL_CLOCK_S = 1735689600  # 2025-01-01: a wall clock before this is not set
@@ -69,32 +81,45 @@ def wall_to_units(wall_s: float) -> int:
     return max(0, int((wall_s - EPOCH_2015_S) * UNITS_PER_S))
 
 
+def timestamp_in_bounds(timestamp: int, wall_s: float) -> bool:
+    """Whether a timestamp from outside (SETUP_SIGNING, the saved file) may be taken: bounded as a
+    frame's is (not more than FUTURE_LIMIT_S ahead of a wall clock that is set) and within the
+    48-bit field."""
+    if wall_s >= SANE_WALL_CLOCK_S and timestamp > wall_to_units(wall_s + FUTURE_LIMIT_S):
+        return False
+    return 0 <= timestamp <= MAX_TIMESTAMP
+
+
 def signature_of(key: bytes, frame_without_signature: bytes) -> bytes:
     return hashlib.sha256(key + frame_without_signature).digest()[:6]
 
 
 class Signing:
-    def __init__(self, key: bytes | None = None, timestamp: int = 0, require: bool = False) -> None:
+    def __init__(self, key: bytes | None = None, timestamp: int = 0, require: bool = False, floor: int = 0) -> None:
         self.key = key
-        self.timestamp = timestamp
+        self.timestamp = min(timestamp, MAX_TIMESTAMP)
         self.require = require
         self._streams: dict[tuple[int, int, int], int] = {}
-        self._floor = 0  # the highest timestamp of a forgotten stream
+        self._floor = floor  # a new stream must be above it: a forgotten stream's last, the saved one
 
     @property
     def checks_needed(self) -> bool:
         """False when every frame is accepted untouched (no key, not required): the fast path."""
         return self.key is not None or self.require
 
-    def set_key(self, key: bytes | None, timestamp: int = 0) -> None:
-        """A new key (None or 32 zero bytes: signing off). Known streams are forgotten."""
-        self.key = None if key is None or key == bytes(32) else bytes(key)
-        self.timestamp = max(self.timestamp, timestamp)
-        self._streams.clear()
-        self._floor = 0
+    def set_key(self, key: bytes | None, timestamp: int, wall_s: float) -> None:
+        """SETUP_SIGNING: the key (None or 32 zero bytes: signing off) and the timestamp, assigned
+        within the bounds. A different key forgets the known streams; the same key keeps them."""
+        key = None if key is None or key == bytes(32) else bytes(key)
+        if key != self.key:
+            self._streams.clear()
+            self._floor = 0
+        self.key = key
+        taken = timestamp if timestamp_in_bounds(timestamp, wall_s) else 0
+        self.timestamp = min(MAX_TIMESTAMP, max(wall_to_units(wall_s), taken))
 
     def next_timestamp(self, wall_s: float) -> int:
-        self.timestamp = max(self.timestamp + 1, wall_to_units(wall_s))
+        self.timestamp = min(MAX_TIMESTAMP, max(self.timestamp + 1, wall_to_units(wall_s)))
         return self.timestamp
 
     def check(self, raw: bytes, msgid: int, sysid: int, compid: int, unsigned_ok: bool,
@@ -122,10 +147,10 @@ class Signing:
         stream = (sysid, compid, link_id)
         last = self._streams.get(stream)
         if last is None:
-            if ts <= self._floor:
-                return REPLAY  # older than a stream we had to forget: it may be one of its frames
             if ts + WINDOW_UNITS < self.timestamp:
                 return STALE
+            if ts <= self._floor:
+                return REPLAY  # not above a stream we had to forget (or the saved timestamp)
             if len(self._streams) >= MAX_STREAMS:
                 oldest = min(self._streams, key=self._streams.get)
                 self._floor = max(self._floor, self._streams.pop(oldest))
@@ -183,23 +208,26 @@ class SigningManager:
 
     def __init__(self, config_key: bytes | None, require: bool, store: SigningStore | None, wall_s: float) -> None:
         self.store = store
+        self.load_error: str | None = None
+        self.load_repair: str | None = None
         saved = None
         if store is not None:
             try:
                 saved = store.load()
             except (OSError, ValueError) as exc:
                 self.load_error = str(exc)
-            else:
-                self.load_error = None
-        timestamp = max(wall_to_units(wall_s), SigningStore.restart_timestamp(saved) if saved else 0)
+        if saved is not None and not timestamp_in_bounds(saved.timestamp, wall_s):
+            self.load_repair = f"saved timestamp {saved.timestamp} out of bounds: the wall clock replaces it"
+            saved = SavedSigning(saved.key, wall_to_units(wall_s), saved.clean)
+        restart = SigningStore.restart_timestamp(saved) if saved else 0
         key = config_key if config_key is not None else (saved.key if saved else None)
-        self.signing = Signing(key, timestamp, require)
-        self.signing.set_key(key)  # all-zero key: off
+        floor = max(0, restart - WINDOW_UNITS - 1) if saved else 0
+        self.signing = Signing(None if key == bytes(32) else key, max(wall_to_units(wall_s), restart), require, floor)
         self._saved_timestamp = -1
         self._last_warning_s: dict[int, float] = {}
 
-    def apply_key(self, key: bytes, initial_timestamp: int) -> None:
-        self.signing.set_key(key, initial_timestamp)
+    def apply_key(self, key: bytes, initial_timestamp: int, wall_s: float) -> None:
+        self.signing.set_key(key, initial_timestamp, wall_s)
         self.save(clean=False)
 
     def save(self, clean: bool = False) -> None:

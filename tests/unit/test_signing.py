@@ -5,8 +5,21 @@ import os
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.signing import (
-    BAD_SIGNATURE, FUTURE, FUTURE_LIMIT_S, MAX_STREAMS, NO_KEY, REPLAY, STALE, UNITS_PER_S, UNSIGNED,
-    SavedSigning, Signing, SigningManager, SigningStore, wall_to_units,
+    BAD_SIGNATURE,
+    FUTURE,
+    FUTURE_LIMIT_S,
+    MAX_STREAMS,
+    MAX_TIMESTAMP,
+    NO_KEY,
+    REPLAY,
+    STALE,
+    UNITS_PER_S,
+    UNSIGNED,
+    SavedSigning,
+    Signing,
+    SigningManager,
+    SigningStore,
+    wall_to_units,
 )
 
 KEY = bytes(range(32))
@@ -81,7 +94,7 @@ def test_signed_frame_without_a_key_is_refused_only_when_required():
 
 def test_all_zero_key_turns_signing_off():
     s = Signing(KEY, NOW)
-    s.set_key(bytes(32))
+    s.set_key(bytes(32), 0, WALL)
     assert s.key is None and not s.checks_needed
 
 
@@ -167,3 +180,76 @@ def test_a_timestamp_more_than_five_minutes_ahead_of_the_wall_clock_is_refused_a
 def test_the_future_limit_is_not_applied_while_the_wall_clock_is_not_set():
     s = Signing(KEY, NOW)
     assert s.check(signed_frame(timestamp=NOW + 10 * 365 * 86400 * UNITS_PER_S), 76, 255, 190, False, 1000.0) is None
+
+
+# --- SETUP_SIGNING's initial timestamp (issue 17, items 4 and 5) ----------------------------------
+
+def test_setup_with_a_timestamp_a_day_ahead_is_not_taken_so_a_correct_station_is_still_accepted():
+    s = Signing(None, NOW)
+    s.set_key(KEY, wall_to_units(WALL + 86400), WALL)
+    assert s.timestamp == NOW, "beyond the future limit, as a frame would be refused: the wall clock"
+    assert s.check(signed_frame(timestamp=NOW + 5), 76, 255, 190, False, WALL) is None
+    s.set_key(KEY, wall_to_units(WALL + FUTURE_LIMIT_S - 1), WALL)  # within the limit: taken
+    assert s.timestamp == wall_to_units(WALL + FUTURE_LIMIT_S - 1)
+
+
+def test_a_later_setup_assigns_the_timestamp_so_it_repairs_a_wrong_one():
+    s = Signing(None, NOW)
+    s.set_key(KEY, wall_to_units(WALL + FUTURE_LIMIT_S - 1), WALL)
+    assert check(s, signed_frame(timestamp=NOW + 10)) == STALE
+    s.set_key(KEY, NOW, WALL)
+    assert s.timestamp == NOW
+    assert check(s, signed_frame(timestamp=NOW + 10, link_id=1)) is None
+
+
+def test_setup_never_puts_the_timestamp_below_the_wall_clock():
+    s = Signing(None, 0)
+    s.set_key(KEY, 0, WALL)
+    assert s.timestamp == NOW
+
+
+def test_setup_again_with_the_same_key_reopens_no_replay():
+    s = Signing(KEY, NOW)
+    captured = signed_frame(timestamp=NOW + 100)
+    assert check(s, captured) is None
+    s.set_key(KEY, NOW, WALL)
+    assert check(s, captured) == REPLAY
+    s.set_key(bytes(32 * [3]), NOW, WALL)  # positive control: a new key forgets the streams
+    assert s.check(signed_frame(key=bytes(32 * [3]), timestamp=NOW + 100), 76, 255, 190, False) is None
+
+
+def test_setup_with_the_largest_uint64_timestamp_keeps_every_send_inside_48_bits():
+    s = Signing(None, NOW)
+    s.set_key(KEY, 2**64 - 1, WALL)
+    assert s.timestamp == NOW
+    unset = Signing(None, 0)  # no wall clock to judge by: the 48-bit field still bounds it
+    unset.set_key(KEY, 2**64 - 1, 1000.0)
+    assert unset.timestamp == 0
+    unset.set_key(KEY, MAX_TIMESTAMP, 1000.0)
+    assert [unset.next_timestamp(1000.0) for _ in range(3)] == [MAX_TIMESTAMP] * 3, "stops at the top"
+    mav = M.MAVLink(None, srcSystem=1, srcComponent=1)
+    mav.signing.secret_key, mav.signing.link_id, mav.signing.sign_outgoing = KEY, 0, True
+    mav.signing.timestamp = unset.next_timestamp(1000.0)
+    assert M.MAVLink_heartbeat_message(2, 3, 0, 0, 0, 3).pack(mav)  # packs: no struct.error
+
+
+def test_a_saved_timestamp_beyond_the_bound_is_repaired_at_load(tmp_path):
+    store = SigningStore(tmp_path / "signing.key")
+    for bad in (wall_to_units(WALL + 86400), 2**64 - 1):
+        store.save(KEY, bad, clean=True)
+        m = SigningManager(None, False, store, WALL)
+        assert m.load_repair is not None
+        assert m.signing.timestamp <= wall_to_units(WALL + 120)
+        assert m.signing.check(signed_frame(timestamp=NOW + 70 * UNITS_PER_S), 76, 255, 190, False, WALL) is None
+    store.save(KEY, NOW, clean=True)  # positive control: a saved timestamp within bounds is kept
+    m = SigningManager(None, False, store, WALL)
+    assert m.load_repair is None and m.signing.timestamp > NOW + 60 * UNITS_PER_S
+
+
+def test_a_frame_at_or_below_the_saved_timestamp_is_refused_after_a_restart_whatever_setup_follows(tmp_path):
+    store = SigningStore(tmp_path / "signing.key")
+    store.save(KEY, NOW, clean=True)
+    m = SigningManager(None, False, store, WALL)
+    m.signing.set_key(KEY, NOW - 30 * UNITS_PER_S, WALL)  # the same key, a lower timestamp
+    assert check(m.signing, signed_frame(timestamp=NOW)) == REPLAY
+    assert check(m.signing, signed_frame(timestamp=NOW + 1, link_id=2)) is None

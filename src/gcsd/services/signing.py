@@ -3,7 +3,9 @@ frame that arrived signed with the current key, or on a channel marked `unsigned
 link); anything else is refused with a STATUSTEXT, so a hijacker on an open radio cannot
 install its own key. Refused while armed ("ERROR: Won't setup signing when armed"), and the
 refusal goes back on the channel it came from so the ground station sees why (QGC #14250).
-An all-zero key turns signing off. No ACK exists for this message."""
+An all-zero key turns signing off. The initial timestamp is assigned as ArduPilot assigns it,
+bounded as a frame's timestamp is (see signing.py), so a later setup repairs a wrong one. No ACK
+exists for this message."""
 
 from __future__ import annotations
 
@@ -31,7 +33,7 @@ class SigningService(Service):
             return
         key = bytes(inc.msg.secret_key)
         try:
-            self.manager.apply_key(key, inc.msg.initial_timestamp)
+            self.manager.apply_key(key, inc.msg.initial_timestamp, node.clock.wall())
         except OSError:
             node.send_text(M.MAV_SEVERITY_ERROR, "ERROR: Failed to save signing key", channels=here)
             return
