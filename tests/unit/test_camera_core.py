@@ -4,6 +4,8 @@ EXIF position is the photo's."""
 
 from __future__ import annotations
 
+import itertools
+
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
@@ -70,7 +72,7 @@ def test_photos_are_at_least_the_minimum_interval_apart():
         cam.image_start(0, 0, 1)
     shots = run(cam, 0.0, 1.0, dt=0.01)
     assert len(shots) == 3
-    assert all(b.now - a.now >= MIN_INTERVAL_S - 1e-9 for a, b in zip(shots, shots[1:]))
+    assert all(b.now - a.now >= MIN_INTERVAL_S - 1e-9 for a, b in itertools.pairwise(shots))
 
 
 def test_trigger_distance_takes_a_photo_every_so_many_metres():
@@ -79,7 +81,7 @@ def test_trigger_distance_takes_a_photo_every_so_many_metres():
     shots = run(cam, 0.0, 10.0, dt=0.1, moving_ms=10.0)  # 100 m north at 10 m/s
     assert len(shots) == 4  # the first position is remembered, then every 20 m
     norths = [(s.pose.lat - HOME[0]) * 111319.49 for s in shots]
-    assert all(b - a == pytest.approx(20.0, abs=1.1) for a, b in zip(norths, norths[1:]))
+    assert all(b - a == pytest.approx(20.0, abs=1.1) for a, b in itertools.pairwise(norths))
     cam.set_trigger_distance(0.0, 1)  # off, with one photo now
     assert len(run(cam, 10.0, 5.0, dt=0.1, moving_ms=10.0)) == 1
 

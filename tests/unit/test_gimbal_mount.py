@@ -8,8 +8,20 @@ import math
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.gimbal.mount import (GPS_POINT, MAVLINK, NEUTRAL, RC, RETRACT, SLEW_RATE_DEG_S, SYSID, Mount, MountParams,
-                               Pose, euler, quaternion)
+from gcsd.gimbal.mount import (
+    GPS_POINT,
+    MAVLINK,
+    NEUTRAL,
+    RC,
+    RETRACT,
+    SLEW_RATE_DEG_S,
+    SYSID,
+    Mount,
+    MountParams,
+    Pose,
+    euler,
+    quaternion,
+)
 from gcsd.gimbal.params import GROUP, mount_params, with_mount_params
 from gcsd.params.store import INT8, ParamDef
 from gcsd.sim.geo import offset
@@ -196,7 +208,7 @@ def test_messages_carry_the_limits_ids_and_attitude():
     m.pitchyaw(0, -10.0, 20.0, NAN, NAN, 1)
     settle(m, 0.0, pose())
     att = m.attitude_status(99)
-    roll, pitch, yaw = euler(list(att.q))
+    _roll, pitch, yaw = euler(list(att.q))
     assert (math.degrees(pitch), math.degrees(yaw)) == pytest.approx((-10.0, 20.0))
     assert att.gimbal_device_id == 1 and math.isnan(att.delta_yaw)
     packed = att.pack(M.MAVLink(None, 1, 1))

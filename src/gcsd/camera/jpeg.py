@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import math
 import time
+
 from PIL import Image, ImageDraw
 from PIL.TiffImagePlugin import IFDRational as Fraction
 
