@@ -18,6 +18,12 @@ socket buffer is logged and counted; the channel reconnects, and the daemon keep
   frame when the channel needs signatures).
 - tcp-client, serial: one peer while connected; reconnect after loss.
 
+Host names are resolved (without blocking the loop) at every open, so a name whose address
+changes, or that does not resolve yet, is picked up at the next attempt of the capped backoff.
+A serial device that is missing or unplugged is opened again when its path (such as a
+`/dev/serial/by-id/` link) is back, by the same backoff; with a list of bauds, a port that hears
+no good frame is reopened at the next baud (baudhunt.py).
+
 A server channel (udp-server, tcp-server) that cannot open its address the first time is a
 startup failure (`ChannelStartError`, exit 1), never a daemon that sits there half-working;
 after it has been open once, it is reopened with backoff like the others.
@@ -31,6 +37,7 @@ from collections.abc import Callable
 
 import structlog
 
+from .baudhunt import BaudHunt
 from .channel import Channel
 from .discovery import BroadcastLock
 
@@ -176,13 +183,19 @@ class _Stream(asyncio.Protocol):
             self.closed.set_result(exc)
 
 
-async def _open(channel: Channel):
+async def resolve(host: str, port: int, kind: int = socket.SOCK_DGRAM) -> tuple[str, int]:
+    """HOST (a name or an IPv4 address) -> its first IPv4 address, without blocking the loop."""
+    infos = await asyncio.get_running_loop().getaddrinfo(host, port, family=socket.AF_INET, type=kind)
+    return infos[0][4][:2]
+
+
+async def _open(channel: Channel, baud: int | None = None):
     """Open the transport; returns (closer, closed_future)."""
     loop = asyncio.get_running_loop()
     cfg = channel.config
     kind = cfg.type
     if kind in ("udp-server", "udp-client"):
-        host, port = cfg.address
+        host, port = await resolve(*cfg.address)
         server = kind == "udp-server"
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF)
@@ -197,7 +210,7 @@ async def _open(channel: Channel):
             if cfg.broadcast:
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
         sock.setblocking(False)
-        addr = None if server else (socket.gethostbyname(host), port)
+        addr = None if server else (host, port)
         bcast = BroadcastLock(addr) if not server and cfg.broadcast else None
         proto = _Datagram(channel, sock, accept_new_peers=server, bcast=bcast)
         channel.local_address = sock.getsockname()[:2]
@@ -229,7 +242,7 @@ async def _open(channel: Channel):
         import serial_asyncio
 
         transport, proto = await serial_asyncio.create_serial_connection(
-            loop, lambda: _Stream(channel, key=cfg.device), cfg.device, baudrate=cfg.baud
+            loop, lambda: _Stream(channel, key=cfg.device), cfg.device, baudrate=baud or cfg.baud
         )
         return transport.close, proto.closed
     if kind == "mqtt":
@@ -247,6 +260,7 @@ def _describe(channel: Channel) -> str:
 
 SERVER_TYPES = ("udp-server", "tcp-server")
 PASS_FAILED_PAUSE_S = 0.1
+CLOSE_WAIT_S = 1.0
 
 
 async def run_channel(
@@ -269,9 +283,11 @@ async def run_channel(
     backoff = BACKOFF_START_S
     clock = channel.clock
     ever_opened = False
+    hunt = BaudHunt(channel.config.bauds) if channel.config.type == "serial" else None
     while True:
+        baud = hunt.opening(clock()) if hunt is not None else None
         try:
-            close, closed = await _open(channel)
+            close, closed = await _open(channel, baud)
         except Exception as exc:  # OSError, serial.SerialException and friends
             error = str(exc) if isinstance(exc, OSError) else repr(exc)
             if not ever_opened and channel.config.type in SERVER_TYPES:
@@ -285,11 +301,16 @@ async def run_channel(
             continue
         ever_opened = True
         backoff = BACKOFF_START_S
-        log.info("channel_opened", channel=channel.name, type=channel.config.type, address=_describe(channel))
+        log.info("channel_opened", channel=channel.name, type=channel.config.type, address=_describe(channel),
+                 baud=baud)
         opened(channel, True)
+        next_baud = False
         try:
             while not closed.done():
                 now = clock()
+                if hunt is not None and _probe_over(channel, hunt, now):
+                    next_baud = True
+                    break
                 try:
                     deadline = send_pass(channel, now)
                 except Exception:
@@ -309,5 +330,24 @@ async def run_channel(
                     await asyncio.sleep(0)
         finally:
             close()
+        # the old connection's connection_lost must run before a new one takes the same peer key
+        await asyncio.wait({closed}, timeout=CLOSE_WAIT_S)
+        if next_baud:  # a baud that heard nothing: the next one at once
+            log.info("serial_baud_changed", channel=channel.name, baud=hunt.bauds[hunt.index])
+            continue
+        if hunt is not None:
+            hunt.closed()
         log.warning("channel_closed", channel=channel.name, retry_s=backoff)
         await asyncio.sleep(backoff)
+
+
+def _probe_over(channel: Channel, hunt: BaudHunt, now: float) -> bool:
+    """A serial port probing a baud list: lock on the first good frame, or move on (baudhunt.py)."""
+    if hunt.locked:
+        return False
+    peer = channel.peers.get(channel.config.device)
+    if peer is not None and peer.heard:
+        hunt.heard()
+        log.info("serial_baud_locked", channel=channel.name, baud=hunt.bauds[hunt.index])
+        return False
+    return hunt.expired(now)
