@@ -44,7 +44,8 @@ from .codec import Encoder, Frame, FrameParser, MAVLink_message, ParseStats
 from .config import ChannelConfig
 from .filters import counters as gate_counters
 from .filters import gates
-from .router import MSG_ID_RADIO, MSG_ID_RADIO_STATUS, ChannelPolicy
+from .msgids import RADIO_IDS
+from .router import ChannelPolicy
 
 MAX_FRAME_BYTES = 280
 UDP_PEER_TIMEOUT_S = 30.0
@@ -53,7 +54,7 @@ DEFAULT_MAX_PEERS = 8
 # ParseStats field -> the channel counter it is reported as
 _INBOUND = {"frames": "packets_in", "bytes": "bytes_in", "parse_errors": "parse_errors",
             "crc_errors": "crc_errors", "unknown_ids": "unknown_ids", "seq_gaps": "seq_gaps"}
-_NO_STATE = (MSG_ID_RADIO_STATUS, MSG_ID_RADIO)  # a radio's own reports: they say nothing about the peer
+_NO_STATE = RADIO_IDS  # a radio's own reports: they say nothing about the peer
 
 
 @dataclass
@@ -136,7 +137,6 @@ class Channel:
         self.max_peers = getattr(config, "max_peers", None) or DEFAULT_MAX_PEERS
         self._start_v1 = config.mavlink == 1
         self._v1_peers = 0
-        self.active = False  # has received something other than RADIO_STATUS
         self.budget = TokenBucket(config.bandwidth, clock()) if config.bandwidth else None
         self.local_address: tuple[str, int] | None = None
         self.verify: Callable[[Frame], str | None] = _accept_all  # None: accepted, else the reject reason

@@ -14,7 +14,7 @@ pymavlink decodes a frame only when something local reads `Frame.msg`. What a ro
   0xFD/0xFE is still found.
 
 Send: `Encoder` packs messages for one (channel, source component) pair: its own sequence
-number, MAVLink1 or MAVLink2 output, and (later) signing. MAVLink1 cannot carry ids > 255;
+number, MAVLink1 or MAVLink2 output, and MAVLink2 signing when given a key. MAVLink1 cannot carry ids > 255;
 such messages are not sent on a MAVLink1 link, as in ArduPilot.
 """
 
@@ -269,11 +269,3 @@ class Encoder:
         mav.seq = (mav.seq + 1) & 0xFF
         return raw
 
-
-def decode_targets(msg: MAVLink_message) -> tuple[int, int]:
-    return getattr(msg, "target_system", -1), getattr(msg, "target_component", -1)
-
-
-def message_class(msgid: int):
-    """The pymavlink class for a message id, or None if the dialect does not know it."""
-    return mavlink.mavlink_map.get(msgid)

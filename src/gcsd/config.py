@@ -30,8 +30,7 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path, PurePath
 from types import MappingProxyType
 
@@ -40,181 +39,53 @@ from yaml.nodes import MappingNode, SequenceNode
 
 from .config_companion import (
     COMPANION_KEYS,
-    ChannelFilter,
-    RoutingConfig,
     read_bauds,
     read_companion,
     read_routing,
 )
-from .config_mqtt import MQTT_KEYS, MqttConfig, read_mqtt
+from .config_mqtt import MQTT_KEYS, read_mqtt
 from .config_reader import Field, Reader, Section, describe, is_null, line_of
+from .config_schema import (  # noqa: F401  the schema, re-exported: `from gcsd.config import Config` works
+    CHANNEL_OPTIONS,
+    CHANNEL_TYPES,
+    COMPANION_COMPID,
+    DATAGRAM_TYPES,
+    DEFAULT_FTP_MAX_FILE_BYTES,
+    DEFAULT_MAX_PEERS,
+    DEFAULT_STREAM_RATES_HZ,
+    LOG_FORMATS,
+    LOG_LEVELS,
+    MAX_CHANNELS,
+    MAX_CONFIG_BYTES,
+    MAX_DEPTH,
+    MAX_FTP_FILE_BYTES,
+    MAX_MAX_PEERS,
+    MAX_MISSION_ITEMS,
+    MAX_MISSION_RETRY_MS,
+    MAX_SPEEDUP,
+    MAX_STREAM_RATE_HZ,
+    MIN_MISSION_RETRY_MS,
+    NETWORK_TYPES,
+    SERIAL_CONTROL_PORTS,
+    SERVER_TYPES,
+    SIGNING_KEY_HEX_CHARS,
+    VEHICLE_TYPES,
+    ChannelConfig,
+    Config,
+    ConfigError,
+    FtpConfig,
+    GcsConfig,
+    Home,
+    LogConfig,
+    MissionConfig,
+    SerialControlPort,
+    SigningConfig,
+    Source,
+    VehicleConfig,
+)
+from .streams import STREAM_NAMES
 
-STREAM_NAMES = ("raw_sens", "ext_stat", "rc_chan", "raw_ctrl", "position",
-                "extra1", "extra2", "extra3", "params", "adsb")
-DEFAULT_STREAM_RATES_HZ = {"raw_sens": 2, "ext_stat": 2, "rc_chan": 5, "raw_ctrl": 0, "position": 2,
-                           "extra1": 5, "extra2": 5, "extra3": 2, "params": 10, "adsb": 0}
-VEHICLE_TYPES = ("copter", "plane", "rover", "sub", "tracker", "blimp", "companion")
-CHANNEL_TYPES = ("udp-server", "udp-client", "tcp-server", "tcp-client", "serial", "mqtt")
-CHANNEL_OPTIONS = ("no_forward", "no_stream_override", "unsigned_ok", "forward_bad_crc", "high_latency",
-                   "sign_forwarded")
-LOG_LEVELS = ("debug", "info", "warning", "error")
-LOG_FORMATS = ("console", "json")
-
-DEFAULT_FTP_MAX_FILE_BYTES = 64 * 1024 * 1024
-MAX_FTP_FILE_BYTES = 0xFFFFFFFF  # FTP offsets are u32
-MAX_CHANNELS = 10  # the SRn_* parameters have one digit, n = 0..9
-MAX_STREAM_RATE_HZ = 50
-MAX_SPEEDUP = 1000
-COMPANION_COMPID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
-SIGNING_KEY_HEX_CHARS = 64
-MAX_MISSION_ITEMS = 65535  # MISSION_COUNT.count is a uint16
-MIN_MISSION_RETRY_MS, MAX_MISSION_RETRY_MS = 50, 5000
-DEFAULT_MAX_PEERS, MAX_MAX_PEERS = 8, 64  # ground stations one udp-server/tcp-server serves at once
-MAX_CONFIG_BYTES = 1024 * 1024  # a configuration is a few KB; /dev/zero or a log file is refused
-MAX_DEPTH = 32  # the schema needs 4; the composer recurses, so depth is checked before it runs
-_SERVER_TYPES = ("udp-server", "tcp-server")
 _WILDCARD_HOSTS = ("0.0.0.0", "::", "*")
-
-
-@dataclass(frozen=True)
-class Home:
-    lat: float = -35.363262
-    lon: float = 149.165237
-    alt: float = 584.0
-
-
-@dataclass(frozen=True)
-class VehicleConfig:
-    type: str = "copter"
-    sysid: int = 1
-    compid: int | None = None  # None resolves to COMPANION_COMPID for a companion, else 1
-    count: int = 1
-    home: Home = Home()
-    speedup: float = 1.0
-
-    def __post_init__(self) -> None:
-        if self.compid is None:
-            object.__setattr__(self, "compid", COMPANION_COMPID if self.type == "companion" else 1)
-
-
-@dataclass(frozen=True)
-class GcsConfig:
-    sysid: int = 255
-    enforce_sysid: bool = False
-
-
-@dataclass(frozen=True)
-class MissionConfig:
-    max_items: int = 700  # mission items, home (item 0) included
-    max_fence: int = 100
-    max_rally: int = 50
-    retry_ms: int = 1000  # the longest wait before re-requesting an item (ArduPilot's fixed 1000 ms); see gcsd.rtt
-
-
-@dataclass(frozen=True)
-class FtpConfig:
-    root: str = "ftp"
-    max_file_bytes: int = DEFAULT_FTP_MAX_FILE_BYTES  # WriteFile/TruncateFile beyond this: FailErrno EFBIG
-
-
-@dataclass(frozen=True)
-class SigningConfig:
-    key: bytes | None = None
-    require: bool = False
-
-
-@dataclass(frozen=True)
-class ChannelConfig:
-    name: str
-    type: str
-    address: tuple[str, int] | None = None  # udp and tcp types
-    device: str | None = None  # serial
-    baud: int = 115200
-    mavlink: int = 2
-    streams: Mapping[str, float] = field(default_factory=dict)  # Hz, merged over the defaults
-    options: frozenset[str] = frozenset()
-    private: bool = False
-    bandwidth: int | None = None  # bytes/s; None is unlimited, except serial: it resolves to baud // 10
-    max_peers: int = DEFAULT_MAX_PEERS  # udp-server/tcp-server: ground stations served at once
-    broadcast: bool = False  # udp-client: send to the (broadcast) address until a station answers (discovery.py)
-    mqtt: MqttConfig | None = None  # type mqtt: broker, topic, role, ... (config_mqtt.py)
-    # companion routing (config_companion.py)
-    bauds: tuple[int, ...] = ()  # serial: the bauds tried in turn until a good frame; () is (baud,)
-    group: str | None = None  # channels of one group are redundant links to the same systems
-    filter: ChannelFilter = field(default_factory=ChannelFilter)
-    rate_limits: Mapping[int, float] = field(default_factory=dict)  # msgid -> Hz on this channel's output
-    request_streams: float = 0.0  # Hz: REQUEST_DATA_STREAM to each autopilot learned here; 0: never
-
-    def __post_init__(self) -> None:
-        if not self.bauds:
-            object.__setattr__(self, "bauds", (self.baud,))
-        object.__setattr__(self, "rate_limits", MappingProxyType(dict(self.rate_limits)))
-        # Any mapping given is merged over the defaults and frozen, so streams always has all ten.
-        object.__setattr__(self, "streams", MappingProxyType(
-            {name: float(self.streams.get(name, DEFAULT_STREAM_RATES_HZ[name])) for name in STREAM_NAMES}))
-        if self.bandwidth is None and self.type == "serial":
-            object.__setattr__(self, "bandwidth", self.baud // 10)
-
-
-@dataclass(frozen=True)
-class SerialControlPort:
-    """A device a ground station may reach with SERIAL_CONTROL (REFERENCE.md section 11)."""
-
-    port: str  # SERIAL_CONTROL_PORTS: telem1, telem2, gps1, gps2, serial0..serial9
-    device: str
-    baud: int = 115200
-
-
-@dataclass(frozen=True)
-class LogConfig:
-    level: str = "info"
-    format: str = "console"
-    tlog: str | None = None
-
-
-@dataclass(frozen=True)
-class Source:
-    """Where a configuration came from: the file and the line of each key path (for messages)."""
-
-    file: str | None = None  # None: the built-in default
-    lines: Mapping[str, int] = field(default_factory=lambda: MappingProxyType({}))
-
-    def where(self, path: str) -> str:
-        """``FILE:LINE: key.path`` for a key of this configuration (the nearest enclosing key's
-        line when the key itself is absent: it took its default)."""
-        if self.file is None:
-            return f"(built-in default configuration): {path}"
-        probe = path
-        while probe and probe not in self.lines:
-            probe = probe.rpartition(".")[0] if "." in probe else probe.rpartition("[")[0]
-        return f"{self.file}:{self.lines.get(probe, 1)}: {path}"
-
-
-@dataclass(frozen=True)
-class Config:
-    vehicle: VehicleConfig = VehicleConfig()
-    state_dir: Path = Path("./gcsd-state")
-    params_file: Path | None = None
-    gcs: GcsConfig = GcsConfig()
-    mission: MissionConfig = MissionConfig()
-    ftp: FtpConfig = FtpConfig()
-    signing: SigningConfig = SigningConfig()
-    channels: tuple[ChannelConfig, ...] = (  # config/gcsd.yaml says why (README "Connect a ground station")
-        ChannelConfig(name="lan", type="udp-client", address=("255.255.255.255", 14550), broadcast=True),
-        ChannelConfig(name="gcs", type="udp-server", address=("0.0.0.0", 14551)),
-    )
-    log: LogConfig = LogConfig()
-    serial_control: tuple[SerialControlPort, ...] = ()
-    routing: RoutingConfig = field(default_factory=RoutingConfig)
-    source: Source = field(default=Source(), compare=False, repr=False)
-
-
-class ConfigError(Exception):
-    """A configuration that must not start the daemon; `problems` lists every problem found."""
-
-    def __init__(self, problems: list[str]) -> None:
-        super().__init__("\n".join(problems))
-        self.problems = list(problems)
 
 
 def default_config() -> Config:
@@ -280,12 +151,10 @@ def _check_depth(text: str, filename: str) -> None:
 
 _TOP_KEYS = ("vehicle", "state_dir", "params_file", "gcs", "mission", "ftp", "signing", "channels", "log",
              "serial_control", "routing")
-SERIAL_CONTROL_PORTS = ("telem1", "telem2", "gps1", "gps2", *(f"serial{n}" for n in range(10)))
 _VEHICLE_KEYS = ("type", "sysid", "compid", "count", "home", "speedup")
 _MISSION_KEYS = ("max_items", "max_fence", "max_rally", "retry_ms")
 _CHANNEL_KEYS = ("name", "type", "address", "device", "baud", "mavlink", "streams", "options",
                  "private", "bandwidth", "max_peers", "broadcast", *MQTT_KEYS, *COMPANION_KEYS)
-_NETWORK_TYPES = tuple(t for t in CHANNEL_TYPES if t not in ("serial", "mqtt"))
 _SIGNING_KEY = re.compile(f"[0-9a-fA-F]{{{SIGNING_KEY_HEX_CHARS}}}")
 _ADDRESS = re.compile(r"(?:\[(?P<ipv6>[^\]\x00-\x1f]+)\]|(?P<host>[^:\s\[\]\x00-\x1f]+)):(?P<port>[0-9]{1,5})",
                       re.ASCII)
@@ -440,7 +309,7 @@ def _clash(a: ChannelConfig, b: ChannelConfig) -> str | None:
     if a.address is None or b.address is None:
         return None
     (host_a, port_a), (host_b, port_b) = a.address, b.address
-    if a.type in _SERVER_TYPES and b.type in _SERVER_TYPES:
+    if a.type in SERVER_TYPES and b.type in SERVER_TYPES:
         same_protocol = a.type[:3] == b.type[:3]  # a UDP and a TCP server may share a port number
         overlap = host_a == host_b or host_a in _WILDCARD_HOSTS or host_b in _WILDCARD_HOSTS
         if same_protocol and port_a == port_b != 0 and overlap:
@@ -455,7 +324,7 @@ def _channel(r: Reader, c: Section) -> ChannelConfig:
         if key not in c and isinstance(c.node, MappingNode):
             r.problem(c[key], "required for every channel")
     channel_type = r.choice(c["type"], "", CHANNEL_TYPES)
-    serial, network = channel_type == "serial", channel_type in _NETWORK_TYPES
+    serial, network = channel_type == "serial", channel_type in NETWORK_TYPES
     address = device = None
     if "address" in c and serial:
         r.problem(c["address"], "not used by serial channels (use device and baud)")
@@ -470,7 +339,7 @@ def _channel(r: Reader, c: Section) -> ChannelConfig:
         device = r.path(c["device"], None)
     elif serial:
         r.problem(c["device"], "required for type serial")
-    if "max_peers" in c and channel_type not in _SERVER_TYPES:
+    if "max_peers" in c and channel_type not in SERVER_TYPES:
         r.problem(c["max_peers"], "only used by udp-server and tcp-server channels")
     if "broadcast" in c and channel_type != "udp-client":
         r.problem(c["broadcast"], "only used by udp-client channels")

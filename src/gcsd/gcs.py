@@ -36,7 +36,9 @@ from .codec import Frame
 from .config import Config
 from .config_mqtt import route_capacity
 from .node import VehicleNode
-from .router import MAX_ROUTES, MSG_ID_HEARTBEAT, MSG_ID_RADIO, MSG_ID_RADIO_STATUS, Router, RouteTable
+from .msgids import HEARTBEAT as MSG_ID_HEARTBEAT
+from .msgids import is_radio
+from .router import MAX_ROUTES, Router, RouteTable
 from .services.ftp import FtpService
 from .services.signing import SigningService
 from .signing import SAVE_INTERVAL_S, SigningManager, SigningStore
@@ -130,8 +132,7 @@ class GCS:
 
     def _route(self, channel: Channel, frame: Frame, now: float) -> None:
         msgid = frame.msgid
-        if msgid != MSG_ID_RADIO_STATUS and msgid != MSG_ID_RADIO and channel.index not in self.active:
-            channel.active = True
+        if channel.index not in self.active and not is_radio(msgid):
             self.active.add(channel.index)
         decision = self.router.decide(
             channel.index, msgid, frame.sysid, frame.compid, frame.target_system, frame.target_component,

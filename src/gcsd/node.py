@@ -29,6 +29,7 @@ from .clock import Clock
 from .codec import Frame
 from .config import Config
 from .link import Link
+from .msgids import is_radio
 from .params import ParamStore
 from .persist import WriteBehind
 from .services import Incoming
@@ -45,7 +46,6 @@ from .vehicles import VehicleType, prearm_failures, vehicle_params
 
 log = structlog.get_logger("gcsd.node")
 
-ALWAYS_ACCEPTED = frozenset({"RADIO_STATUS", "RADIO"})
 
 
 class VehicleNode:
@@ -187,7 +187,7 @@ class VehicleNode:
         if (
             self.enforce_gcs_sysid
             and frame.sysid not in (self.gcs_sysid, self.sysid)
-            and name not in ALWAYS_ACCEPTED
+            and not is_radio(frame.msgid)
         ):
             return
         try:

@@ -32,11 +32,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .msgids import HEARTBEAT as MSG_ID_HEARTBEAT
+from .msgids import is_radio
+
 MAX_ROUTES = 20
 STALE_S = 30.0
-MSG_ID_HEARTBEAT = 0
-MSG_ID_RADIO_STATUS = 109
-MSG_ID_RADIO = 166
 
 
 @dataclass(slots=True)
@@ -136,7 +136,7 @@ class Router:
             return self._unknown_message(in_channel, sysid, compid, now)
         if sysid != 0 and not (sysid in self.local_sysids and compid == 0):
             self.table.learn(sysid, compid, in_channel, now, mavtype)
-        if msgid == MSG_ID_RADIO_STATUS or msgid == MSG_ID_RADIO:
+        if is_radio(msgid):
             return Decision(True)
         policy_in = self.policies[in_channel]
         closed_in = policy_in.private or policy_in.no_forward
@@ -210,7 +210,3 @@ class Router:
             for ch in sorted(self.table.channels_with_routes())
             if ch != in_channel and not self.policies[ch].private and not self.policies[ch].no_forward
         )
-
-    def local_channels_for(self, sysid: int) -> set[int]:
-        """Channels where a component of `sysid` other than ours was seen (send_to_components)."""
-        return {r.channel for r in self.table if r.sysid == sysid and (r.sysid, r.compid) not in self.local}

@@ -2,8 +2,8 @@
 
 Three kinds of work, served in this order on every `run(now, send)`:
 
-1. Special slots with their own interval, never slowed down: HEARTBEAT (1000 ms), the next
-   PARAM_VALUE of a list download, HIGH_LATENCY2.
+1. Special slots with their own interval, never slowed down: HEARTBEAT (1000 ms) and
+   HIGH_LATENCY2 (a parameter list download is streamed by ParamService.pending instead).
 2. Pushed one-shot messages (REQUEST_MESSAGE, home after a change...), lowest id first.
 3. Ten buckets, each a set of message ids sharing one interval. The bucket due soonest is taken;
    its ids are sent one by one; only when all are out is the bucket rescheduled.
@@ -119,12 +119,6 @@ class SendScheduler:
             return special.interval_ms
         index = self._bucket_of.get(msgid)
         return None if index is None else self._buckets[index].interval_ms
-
-    def scheduled_ids(self) -> set[int]:
-        return set(self._bucket_of)
-
-    def is_streaming(self) -> bool:
-        return bool(self._bucket_of)
 
     # --- one-shots -------------------------------------------------------------------------
     def push(self, msgid: int) -> None:

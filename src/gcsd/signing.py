@@ -55,6 +55,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .atomic import write_atomic
+from .msgids import is_radio
 
 EPOCH_2015_S = 1420070400
 UNITS_PER_S = 100_000
@@ -65,8 +66,6 @@ MAX_TIMESTAMP = (1 << 48) - 1  # the signature's timestamp field is 48 bits
 SIG_LEN = 13  # link id 1 + timestamp 6 + signature 6
 FUTURE_LIMIT_S = 300.0
 SANE_WALL_CLOCK_S = 1735689600  # 2025-01-01: a wall clock before this is not set
-MSG_ID_RADIO_STATUS = 109
-MSG_ID_RADIO = 166
 
 # rejection reasons, also the counter names
 UNSIGNED = "unsigned"
@@ -128,7 +127,7 @@ class Signing:
         changes state (the stream table and the local timestamp)."""
         signed = raw[0] == 0xFD and raw[2] & 0x01
         if not signed:
-            if msgid == MSG_ID_RADIO_STATUS or msgid == MSG_ID_RADIO or unsigned_ok:
+            if unsigned_ok or is_radio(msgid):
                 return None
             return UNSIGNED if self.require else None
         reason = self._check_signed(raw, sysid, compid, wall_s)

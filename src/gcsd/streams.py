@@ -35,7 +35,7 @@ STREAM_MESSAGES: dict[str, tuple[int, ...]] = {
         _M.MAVLINK_MSG_ID_AHRS, _M.MAVLINK_MSG_ID_WIND, _M.MAVLINK_MSG_ID_SYSTEM_TIME,
         _M.MAVLINK_MSG_ID_BATTERY_STATUS, _M.MAVLINK_MSG_ID_EKF_STATUS_REPORT, _M.MAVLINK_MSG_ID_VIBRATION,
     ),
-    "params": (),  # the next PARAM_VALUE of a list download is a special slot, not a bucket
+    "params": (),  # a list download is streamed by ParamService.pending, paced by the link, not a bucket
     "adsb": (_M.MAVLINK_MSG_ID_ADSB_VEHICLE,),
 }
 

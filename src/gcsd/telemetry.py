@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from .codec import MAVLink_message
+from .sim.geo import deg_e7
 from .vehicles.firmware import FLIGHT_CUSTOM_VERSION, FLIGHT_SW_VERSION
 from .vehicles.health import sensor_bits, system_status
 
@@ -24,9 +25,6 @@ if TYPE_CHECKING:
 
 Producer = Callable[["VehicleNode", "Channel", float], MAVLink_message | None]
 
-
-def _e7(deg: float) -> int:
-    return round(deg * 1e7)
 
 
 def heartbeat(node, channel, now):
@@ -61,7 +59,7 @@ def gps_raw_int(node, channel, now):
     s = node.state
     cog = int(s.heading_deg * 100) if s.groundspeed_ms > 0.2 else 65535
     return M.MAVLink_gps_raw_int_message(
-        node.time_usec(now), s.gps_fix_type, _e7(s.lat), _e7(s.lon), int(s.alt_amsl_m * 1000),
+        node.time_usec(now), s.gps_fix_type, deg_e7(s.lat), deg_e7(s.lon), int(s.alt_amsl_m * 1000),
         int(s.hdop * 100), int(s.hdop * 150), int(s.groundspeed_ms * 100), cog, s.satellites,
     )
 
@@ -69,7 +67,7 @@ def gps_raw_int(node, channel, now):
 def global_position_int(node, channel, now):
     s = node.state
     return M.MAVLink_global_position_int_message(
-        node.time_boot_ms(now), _e7(s.lat), _e7(s.lon), int(s.alt_amsl_m * 1000), int(s.relative_alt_m * 1000),
+        node.time_boot_ms(now), deg_e7(s.lat), deg_e7(s.lon), int(s.alt_amsl_m * 1000), int(s.relative_alt_m * 1000),
         int(s.vn_ms * 100), int(s.ve_ms * 100), int(s.vd_ms * 100), int(s.heading_deg * 100) % 36000,
     )
 
@@ -90,12 +88,12 @@ def attitude(node, channel, now):
 
 def ahrs2(node, channel, now):
     s = node.state
-    return M.MAVLink_ahrs2_message(s.roll_rad, s.pitch_rad, s.yaw_rad, s.alt_amsl_m, _e7(s.lat), _e7(s.lon))
+    return M.MAVLink_ahrs2_message(s.roll_rad, s.pitch_rad, s.yaw_rad, s.alt_amsl_m, deg_e7(s.lat), deg_e7(s.lon))
 
 
 def simstate(node, channel, now):
     s = node.state
-    return M.MAVLink_simstate_message(s.roll_rad, s.pitch_rad, s.yaw_rad, 0, 0, -9.81, 0, 0, 0, _e7(s.lat), _e7(s.lon))
+    return M.MAVLink_simstate_message(s.roll_rad, s.pitch_rad, s.yaw_rad, 0, 0, -9.81, 0, 0, 0, deg_e7(s.lat), deg_e7(s.lon))
 
 
 def vfr_hud(node, channel, now):
@@ -222,7 +220,7 @@ def home_position(node, channel, now):
     if not s.has_home:
         return None
     return M.MAVLink_home_position_message(
-        _e7(s.home_lat), _e7(s.home_lon), int(s.home_alt_m * 1000), 0, 0, 0, [1, 0, 0, 0], 0, 0, 0,
+        deg_e7(s.home_lat), deg_e7(s.home_lon), int(s.home_alt_m * 1000), 0, 0, 0, [1, 0, 0, 0], 0, 0, 0,
         node.time_usec(now),
     )
 
@@ -231,7 +229,7 @@ def gps_global_origin(node, channel, now):
     s = node.state
     if not s.has_home:
         return None
-    return M.MAVLink_gps_global_origin_message(_e7(s.home_lat), _e7(s.home_lon), int(s.home_alt_m * 1000), node.time_usec(now))
+    return M.MAVLink_gps_global_origin_message(deg_e7(s.home_lat), deg_e7(s.home_lon), int(s.home_alt_m * 1000), node.time_usec(now))
 
 
 def autopilot_version(node, channel, now):

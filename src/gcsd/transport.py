@@ -39,6 +39,7 @@ import structlog
 
 from .baudhunt import BaudHunt
 from .channel import Channel
+from .config_schema import SERVER_TYPES
 from .discovery import BroadcastLock
 
 log = structlog.get_logger("gcsd.transport")
@@ -258,7 +259,6 @@ def _describe(channel: Channel) -> str:
     return channel.config.device or (channel.config.mqtt.broker if channel.config.mqtt else "")
 
 
-SERVER_TYPES = ("udp-server", "tcp-server")
 PASS_FAILED_PAUSE_S = 0.1
 CLOSE_WAIT_S = 1.0
 

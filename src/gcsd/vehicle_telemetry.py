@@ -14,12 +14,11 @@ import math
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from .sim.geo import deg_e7
+
 AIR_TEMPERATURE_C = 20
 TARGET_TYPE_MASK = 0b110111111000  # position only
 
-
-def _e7(deg: float) -> int:
-    return int(round(deg * 1e7))
 
 
 def _clamp(v: float, lo: int, hi: int) -> int:
@@ -43,7 +42,7 @@ def high_latency2(node, channel, now):
     wind_from = (math.degrees(math.atan2(s.wind_e_ms, s.wind_n_ms)) + 180.0) % 360.0
     return M.MAVLink_high_latency2_message(
         node.time_boot_ms(now), v.mav_type, M.MAV_AUTOPILOT_ARDUPILOTMEGA, s.mode & 0xFFFF,
-        _e7(s.lat), _e7(s.lon), _clamp(s.alt_amsl_m, -32768, 32767),
+        deg_e7(s.lat), deg_e7(s.lon), _clamp(s.alt_amsl_m, -32768, 32767),
         _clamp(target[2] if target else s.alt_amsl_m, -32768, 32767),
         _clamp(s.heading_deg / 2, 0, 179), _clamp(s.target_bearing_deg / 2, 0, 179),
         _clamp(s.wp_dist_m / 10, 0, 65535), _clamp(s.throttle_pct, 0, 100),
@@ -59,7 +58,7 @@ def position_target_global_int(node, channel, now):
         return None
     lat, lon, alt = s.target
     return M.MAVLink_position_target_global_int_message(
-        node.time_boot_ms(now), M.MAV_FRAME_GLOBAL_INT, TARGET_TYPE_MASK, _e7(lat), _e7(lon), alt,
+        node.time_boot_ms(now), M.MAV_FRAME_GLOBAL_INT, TARGET_TYPE_MASK, deg_e7(lat), deg_e7(lon), alt,
         0, 0, 0, 0, 0, 0, 0, 0,
     )
 

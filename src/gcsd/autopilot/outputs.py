@@ -100,7 +100,3 @@ class Outputs:
         if test is not None and self._t >= test[1]:
             self.state.servo_override.pop(test[0], None)
             self._motor_test = None
-
-    @property
-    def repeating(self) -> bool:
-        return self._repeat is not None

@@ -13,13 +13,11 @@ import math
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from ..msgids import ACCEPTED, FAILED, UNSUPPORTED
 from . import Incoming, Service
 from .commands import CommandRequest
 
 FORCE_MAGIC = (21196, 2989)
-_ACCEPTED, _DENIED, _FAILED, _UNSUPPORTED = (
-    M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_DENIED, M.MAV_RESULT_FAILED, M.MAV_RESULT_UNSUPPORTED,
-)
 
 
 class ControlService(Service):
@@ -51,53 +49,53 @@ class ControlService(Service):
             return self._arm(forced)
         if req.param1 == 0:
             return self._disarm(forced)
-        return _UNSUPPORTED
+        return UNSUPPORTED
 
     def arm_by_rudder(self) -> bool:
         """ARMING_RUDDER's gesture (gcsd.vehicles.rc): arming with the same checks as a command."""
-        return self._arm(False) == _ACCEPTED
+        return self._arm(False) == ACCEPTED
 
     def disarm_by_rudder(self) -> bool:
-        return self._disarm(False) == _ACCEPTED
+        return self._disarm(False) == ACCEPTED
 
     def _arm(self, forced: bool) -> int:
         node = self.node
         state = node.state
         if state.armed:
-            return _ACCEPTED
+            return ACCEPTED
         if not node.vehicle.can_arm:
-            return _UNSUPPORTED  # a companion computer: arming is the flight controller's business
+            return UNSUPPORTED  # a companion computer: arming is the flight controller's business
         if not forced:
             failures = node.prearm_failures()
             if failures:
                 for text in failures:
                     node.send_text(M.MAV_SEVERITY_CRITICAL, f"PreArm: {text}")
-                return _FAILED
+                return FAILED
             if not node.vehicle.can_arm_in(state.mode):
                 node.send_text(M.MAV_SEVERITY_CRITICAL, "Arm: Mode not armable")
-                return _FAILED
+                return FAILED
         state.armed = True
         node.send_text(M.MAV_SEVERITY_INFO, "Arming motors")
         node.push_heartbeat()
-        return _ACCEPTED
+        return ACCEPTED
 
     def _disarm(self, forced: bool) -> int:
         node = self.node
         state = node.state
         if not state.armed:
-            return _ACCEPTED
+            return ACCEPTED
         if not forced and state.relative_alt_m > 0.5:
             node.send_text(M.MAV_SEVERITY_CRITICAL, "Disarm: vehicle is flying; use force to disarm")
-            return _FAILED
+            return FAILED
         state.armed = False
         node.send_text(M.MAV_SEVERITY_INFO, "Disarming motors")
         node.push_heartbeat()
-        return _ACCEPTED
+        return ACCEPTED
 
     def do_set_mode(self, req: CommandRequest) -> int:
         if not int(req.param1) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-            return _UNSUPPORTED
-        return _ACCEPTED if self._set_mode(int(req.param2)) else _FAILED
+            return UNSUPPORTED
+        return ACCEPTED if self._set_mode(int(req.param2)) else FAILED
 
     def set_mode(self, number: int) -> bool:
         """Change mode as a ground station asked: False (with a STATUSTEXT) if refused."""
@@ -119,12 +117,12 @@ class ControlService(Service):
 
     def get_home_position(self, req: CommandRequest) -> int:
         if not self.node.state.has_home:
-            return _FAILED
+            return FAILED
         link = self.node.link(req.inc.channel)
         link.push(M.MAVLINK_MSG_ID_HOME_POSITION)
         link.push(M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
-        return _ACCEPTED
+        return ACCEPTED
 
     def send_banner(self, req: CommandRequest) -> int:
         self.node.send_banner()
-        return _ACCEPTED
+        return ACCEPTED

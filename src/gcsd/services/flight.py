@@ -25,13 +25,12 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import Behaviour
 from ..mission.items import GLOBAL_FRAMES
+from ..msgids import ACCEPTED, DENIED, FAILED, UNSUPPORTED
 from ..sim.geo import offset
 from ..vehicles.rc import mapped_channel
 from . import Incoming, Service
 from .commands import CommandRequest
 
-ACCEPTED, DENIED, FAILED, UNSUPPORTED = (
-    M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_DENIED, M.MAV_RESULT_FAILED, M.MAV_RESULT_UNSUPPORTED)
 RELATIVE_FRAMES = frozenset({
     M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_FRAME_GLOBAL_TERRAIN_ALT,
     M.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,

@@ -37,13 +37,14 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from ..msgids import ACCEPTED, FAILED
+
 MAG_CAL_S = 4.0
 PROGRESS_S = 0.5
 REPORT_REPEATS = 3
 FITNESS = 1.8  # mGauss RMS residual of a noise-free simulated sphere fit (below COMPASS_CAL_FIT)
 SITL_OFFSETS = (5.0, 13.0, -18.0)
 MAX_COMPASSES = 3
-ACCEPTED, FAILED = M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_FAILED
 
 
 def _suffix(index: int) -> str:

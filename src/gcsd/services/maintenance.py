@@ -46,6 +46,8 @@ from pathlib import Path
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from ..msgids import ACCEPTED, FAILED, UNSUPPORTED
+from ..msgids import TEMPORARILY_REJECTED as LATER
 from ..vehicles import rc
 from ..vehicles.prearm import PrearmDisplay
 from . import Incoming, Service
@@ -56,9 +58,6 @@ from .magcal import MagCal, compass_params
 
 log = structlog.get_logger("gcsd.maintenance")
 
-ACCEPTED, DENIED, FAILED, UNSUPPORTED, LATER = (
-    M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_DENIED, M.MAV_RESULT_FAILED, M.MAV_RESULT_UNSUPPORTED,
-    M.MAV_RESULT_TEMPORARILY_REJECTED)
 CALIBRATION_S = 2.0
 MAG_OUTBOX = 32
 FORMAT_S = 1.0

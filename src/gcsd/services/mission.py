@@ -47,6 +47,7 @@ from ..mission.items import MissionItem, from_item_float, from_item_int
 from ..mission.stores import FenceStore, MissionStore, PlanStore, RallyStore
 from ..mission.transfer import MissionTransfer, Origin, PlanChanged, Send, Text
 from ..rtt import RttTable
+from ..sim.geo import deg_e7
 from . import Incoming, Service
 from .commands import CommandRequest
 
@@ -59,7 +60,7 @@ GUIDED_CURRENT = (2, 3)  # MISSION_ITEM.current: 2 guided "fly to", 3 change alt
 def home_item(state) -> MissionItem:
     """Item 0 as ArduPilot serves it: a NAV_WAYPOINT at home, absolute altitude."""
     return MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 0, 1, 0.0, 0.0, 0.0, 0.0,
-                       round(state.home_lat * 1e7), round(state.home_lon * 1e7), float(state.home_alt_m))
+                       deg_e7(state.home_lat), deg_e7(state.home_lon), float(state.home_alt_m))
 
 
 class MissionService(Service):

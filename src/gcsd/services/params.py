@@ -47,6 +47,7 @@ import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..config import ConfigError
+from ..config_schema import DATAGRAM_TYPES
 from ..params import ParamEntry, ParamStore, SetResult, as_float, to_type
 from ..params.parmfile import format_parm, read_parm, read_parm_lines
 from ..params.store import REAL32, TYPE_RANGE, fits_real32
@@ -56,7 +57,6 @@ log = structlog.get_logger("gcsd.params")
 
 BURST = 30  # PARAM_VALUEs per send pass on a link with room to spare
 BURST_INTERVAL_S = 0.01  # ...and, on a datagram link, at most one full burst per 10 ms
-DATAGRAM_TYPES = frozenset({"udp-server", "udp-client", "mqtt"})
 PARAM_VALUE_BYTES = 37  # MAVLink2 PARAM_VALUE: 12 bytes of framing + 25 of payload
 PERSIST_INTERVAL_S = 1.0  # at most one write of mav.parm per second
 

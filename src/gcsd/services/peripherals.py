@@ -43,11 +43,10 @@ import math
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from ..msgids import ACCEPTED, DENIED, FAILED, UNSUPPORTED
 from . import Service
 from .commands import CommandRequest
 
-ACCEPTED, DENIED, FAILED, UNSUPPORTED = (
-    M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_DENIED, M.MAV_RESULT_FAILED, M.MAV_RESULT_UNSUPPORTED)
 DEBUG_TRAP_MAGIC = 32451
 AUX_MODES = {4: "RTL", 16: "AUTO", 18: "LAND", 33: "BRAKE", 42: "SMART_RTL", 51: "MANUAL", 52: "ACRO", 55: "GUIDED",
              56: "LOITER"}

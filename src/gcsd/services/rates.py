@@ -18,13 +18,12 @@ from __future__ import annotations
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from ..msgids import ACCEPTED, DENIED, FAILED
 from ..scheduler import MAX_INTERVAL_MS
 from ..streams import REQUEST_DATA_STREAM_IDS
 from ..telemetry import PRODUCERS
 from . import Incoming, Service
 from .commands import CommandRequest
-
-_ACCEPTED, _DENIED, _FAILED = M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_DENIED, M.MAV_RESULT_FAILED
 
 
 class RatesService(Service):
@@ -66,19 +65,19 @@ class RatesService(Service):
     def set_message_interval(self, req: CommandRequest) -> int:
         msgid, interval_us = int(req.param1), req.param2
         if req.param3 != 0 or msgid not in PRODUCERS:
-            return _DENIED
+            return DENIED
         channel = req.inc.channel
         if "no_stream_override" in channel.config.options:
-            return _DENIED
+            return DENIED
         link = self.node.link(channel)
         if interval_us == 0:
             link.reset_interval(msgid, req.inc.now)
-            return _ACCEPTED
+            return ACCEPTED
         if interval_us == -1:
             link.set_interval(msgid, 0, req.inc.now)
-            return _ACCEPTED
+            return ACCEPTED
         if interval_us < 0:
-            return _DENIED
+            return DENIED
         interval_ms = min(max(int(interval_us // 1000), 1), MAX_INTERVAL_MS)
         if interval_ms < self.node.min_interval_ms:
             self.node.send_text(
@@ -86,9 +85,9 @@ class RatesService(Service):
                 f"Requested rate for message ID {msgid} too fast. Increase SCHED_LOOP_RATE",
                 channels={channel.index},
             )
-            return _DENIED
+            return DENIED
         link.set_interval(msgid, interval_ms, req.inc.now)
-        return _ACCEPTED
+        return ACCEPTED
 
     def get_message_interval(self, req: CommandRequest) -> int:
         return self._report_interval(req, int(req.param1))
@@ -97,23 +96,23 @@ class RatesService(Service):
         channel = req.inc.channel
         if msgid >= 65536 or msgid < 0 or msgid not in PRODUCERS:
             self.node.reply(channel, M.MAVLink_message_interval_message(max(0, min(msgid, 65535)), 0))
-            return _FAILED
+            return FAILED
         interval_ms = self.node.link(channel).interval_ms(msgid)
         interval_us = -1 if not interval_ms else interval_ms * 1000
         self.node.reply(channel, M.MAVLink_message_interval_message(msgid, interval_us))
-        return _ACCEPTED
+        return ACCEPTED
 
     def request_message(self, req: CommandRequest) -> int:
         msgid = int(req.param1)
         if msgid == M.MAVLINK_MSG_ID_MESSAGE_INTERVAL:
             return self._report_interval(req, int(req.param2))
         if msgid not in PRODUCERS:
-            return _FAILED
+            return FAILED
         self.node.link(req.inc.channel).push(msgid)
-        return _ACCEPTED
+        return ACCEPTED
 
     def request_autopilot_capabilities(self, req: CommandRequest) -> int:
         if int(req.param1) != 1:
-            return _FAILED
+            return FAILED
         self.node.link(req.inc.channel).push(M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
-        return _ACCEPTED
+        return ACCEPTED

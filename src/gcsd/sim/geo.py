@@ -9,6 +9,11 @@ EARTH_RADIUS_M = 6378137.0
 _M_PER_DEG = math.pi * EARTH_RADIUS_M / 180.0
 
 
+def deg_e7(deg: float) -> int:
+    """Degrees as MAVLink's integer degE7."""
+    return round(deg * 1e7)
+
+
 def ne_m(lat1: float, lon1: float, lat2: float, lon2: float) -> tuple[float, float]:
     """North and east metres from point 1 to point 2."""
     north = (lat2 - lat1) * _M_PER_DEG

@@ -21,19 +21,19 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from .. import __version__
 from ..autopilot.settings import Behaviour, Settings
 from ..sim import VehicleState
+from ..streams import STREAM_NAMES
 from .firmware import version_string
 
 M = mavlink
-COMPANION_BANNER = "gcsd 0.1.0 (companion computer)"
-STREAM_ORDER = ("raw_sens", "ext_stat", "rc_chan", "raw_ctrl", "position", "extra1", "extra2", "extra3",
-                "params", "adsb")
+COMPANION_BANNER = f"gcsd {__version__} (companion computer)"
 
 
 def stream_rates(*rates: int) -> dict[str, int]:
     """ArduPilot's order: RAW_SENS, EXT_STAT, RC_CHAN, RAW_CTRL, POSITION, EXTRA1..3, PARAMS, ADSB."""
-    return dict(zip(STREAM_ORDER, rates, strict=True))
+    return dict(zip(STREAM_NAMES, rates, strict=True))
 
 
 def modes_named(modes: dict[int, str], **behaviours: Behaviour) -> dict[int, Behaviour]:

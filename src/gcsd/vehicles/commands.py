@@ -24,9 +24,9 @@ import math
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..autopilot.settings import Behaviour
+from ..msgids import ACCEPTED, DENIED, FAILED
 from . import prearm
 
-ACCEPTED, DENIED, FAILED = M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_DENIED, M.MAV_RESULT_FAILED
 UNSUPPORTED = M.MAV_RESULT_UNSUPPORTED
 
 
