@@ -15,6 +15,10 @@ Receive, per frame, in this order (SPEC "Signing", "Channels"):
    own reports) count for nothing.
 3. `on_frame(channel, frame, now)`: routing and local handling.
 
+Steps 1-3 run inside the receive boundary (boundary.py): an exception in one frame's signing
+check, admission, routing or handling is counted under "receive" and the next frame goes on; a
+TCP connection is never closed by it.
+
 Admission (no amplification): a udp-server answers an address only after a good frame from it;
 datagrams from unknown addresses go through one shared parser (a datagram holds whole frames,
 so nothing carries over between them) and cost no state. A tcp-server connection is served at
@@ -40,14 +44,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import Protocol
 
-from .codec import Encoder, Frame, FrameParser, MAVLink_message, ParseStats
+from .boundary import ErrorCounts
+from .codec import MAX_FRAME_BYTES, Encoder, Frame, FrameParser, MAVLink_message, ParseStats
 from .config import ChannelConfig
 from .filters import counters as gate_counters
 from .filters import gates
 from .msgids import RADIO_IDS
 from .router import ChannelPolicy
 
-MAX_FRAME_BYTES = 280
 UDP_PEER_TIMEOUT_S = 30.0
 PEER_SWEEP_INTERVAL_S = 1.0
 DEFAULT_MAX_PEERS = 8
@@ -68,6 +72,7 @@ class ChannelStats:
     drops: int = 0  # frames not sent for lack of budget or buffer space
     peers_forgotten: int = 0  # silent for UDP_PEER_TIMEOUT_S
     peers_replaced: int = 0  # dropped for a new peer when max_peers were served
+    muted: int = 0  # frames discarded while a high-latency link's output is disabled
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -154,13 +159,13 @@ class Channel:
         self.wall: Callable[[], float] = time.time
         self.signature_reject_reasons: dict[str, int] = {}
         self.tlog = None  # a TlogWriter shared by all channels, when log.tlog is set
+        self.errors = ErrorCounts()  # the daemon's, set by the composition root
         self._retired = ParseStats()  # counters of peers that are gone
         self._rejected_frames = 0
         self._rejected_bytes = 0
         self._last_sweep_s = 0.0
         # a high-latency link is silent until CONTROL_HIGH_LATENCY enables it (REFERENCE.md 11)
         self.output_enabled = "high_latency" not in config.options
-        self.muted_frames = 0
         # companion routing (filters.py): None when the channel has no filter / no rate cap
         self.in_gate, self.out_gate = gates(config)
 
@@ -258,23 +263,26 @@ class Channel:
                     self.on_bad_crc(self, raw)
         verify, on_frame, tlog, in_gate = self.verify, self.on_frame, self.tlog, self.in_gate
         for frame in frames:
-            if tlog is not None:
-                tlog.record(frame.raw, self.wall())
-            reason = verify(frame)
-            if reason is not None:
-                self._rejected_frames += 1
-                self._rejected_bytes += len(frame.raw)
-                self.on_reject(self, frame, reason, now)
-                continue
-            if frame.msgid not in _NO_STATE:
-                peer.last_rx_s = now
-                if peer.mavlink1 and frame.version == 2 or not peer.heard:
-                    self._set_version(peer, frame.version == 1)
-                if not peer.admitted:
-                    self._admit(peer)
-            if in_gate is not None and not in_gate.allow(frame):
-                continue  # filter.in: after the signature check, before routing and local handling
-            on_frame(self, frame, now)
+            try:  # the receive boundary: one frame's failure is counted, the rest of the batch goes on
+                if tlog is not None:
+                    tlog.record(frame.raw, self.wall())
+                reason = verify(frame)
+                if reason is not None:
+                    self._rejected_frames += 1
+                    self._rejected_bytes += len(frame.raw)
+                    self.on_reject(self, frame, reason, now)
+                    continue
+                if frame.msgid not in _NO_STATE:
+                    peer.last_rx_s = now
+                    if peer.mavlink1 and frame.version == 2 or not peer.heard:
+                        self._set_version(peer, frame.version == 1)
+                    if not peer.admitted:
+                        self._admit(peer)
+                if in_gate is not None and not in_gate.allow(frame):
+                    continue  # filter.in: after the signature check, before routing and local handling
+                on_frame(self, frame, now)
+            except Exception:
+                self.errors.failed("receive", now, channel=self.name, msg=frame.name, sysid=frame.sysid)
 
     # --- send ------------------------------------------------------------------------------
     def encoder(self, sysid: int, compid: int, mavlink1: bool = False) -> Encoder:
@@ -306,7 +314,7 @@ class Channel:
         if not self.peers:
             return True  # nobody to send to is not a failure of the link
         if not self.output_enabled:
-            self.muted_frames += 1
+            self.stats.muted += 1
             return True  # discarded, as a disabled high-latency link discards everything
         if self.budget is not None and not self.budget.try_take(len(raw), self.clock()):
             self.stats.drops += 1

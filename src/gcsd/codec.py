@@ -38,6 +38,7 @@ except ImportError:  # pragma: no cover
 
 MAVLink_message = mavlink.MAVLink_message
 STX_V1 = 0xFE
+MAX_FRAME_BYTES = 280  # MAVLink2: 10 header + 255 payload + 2 CRC + 13 signature
 STX_V2 = 0xFD
 
 

@@ -3,7 +3,8 @@ tables `gcsd status` prints.
 
 The daemon answers each connection with one JSON document: channels (type, address, peers,
 counters, packet rates over the last statistics interval, signing rejects by reason), learned
-routes, the vehicles and the per-component error counts (`errors`). Read-only: nothing can be
+routes, the vehicles, the per-component error counts (`errors`) and the counted events outside
+the channels (`counters`: routing's drops, each service's, summed over a swarm). Read-only: nothing can be
 changed through this socket.
 
 Finding a daemon (the rule `gcsd status` follows; relative paths in a configuration are relative
@@ -202,7 +203,8 @@ def format_status(status: dict, daemon: dict | None = None) -> str:
     problems = [
         [c["name"], c.get("parse_errors", 0), c.get("crc_errors", 0), c.get("unknown_ids", 0), c.get("seq_gaps", 0),
          c.get("drops", 0), c.get("signature_rejects", 0), c.get("peers_forgotten", 0), c.get("peers_replaced", 0),
-         c.get("filtered_in", 0), c.get("filtered_out", 0), c.get("rate_limited", 0), c.get("duplicates", 0)]
+         c.get("filtered_in", 0), c.get("filtered_out", 0), c.get("rate_limited", 0), c.get("duplicates", 0),
+         c.get("muted", 0)]
         for c in chans
     ]
     routes = [[r["sysid"], r["compid"], mav_type_name(r.get("mavtype")), r["channel"], f'{r["age_s"]:.1f}']
@@ -210,6 +212,7 @@ def format_status(status: dict, daemon: dict | None = None) -> str:
     vehicles = [[v["sysid"], v["compid"], v["type"], v["mode"], "yes" if v["armed"] else "no"]
                 for v in status.get("vehicles", [])]
     errors = [[name, count] for name, count in sorted(status.get("errors", {}).items())]
+    counters = [[name, count] for name, count in sorted(status.get("counters", {}).items())]
     head = f'gcsd {status.get("version", "?")}, up {_duration(status.get("uptime_s", 0))}'
     if daemon is not None:
         head += f' (pid {daemon.get("pid")}, config {daemon.get("config") or "built-in default"})'
@@ -222,13 +225,15 @@ def format_status(status: dict, daemon: dict | None = None) -> str:
         _table("Channel errors and drops (counts)", ["channel", "parse", "bad CRC", "unknown id", "seq gaps",
                                                      "drops", "signing rejects", "peers expired",
                                                      "peers replaced", "filtered in", "filtered out",
-                                                     "rate limited", "duplicates"], problems),
+                                                     "rate limited", "duplicates", "muted"], problems),
         "",
         _table("Routes learned", ["sysid", "compid", "MAV_TYPE", "via channel", "last heard (s ago)"], routes),
         "",
         _table("Vehicles", ["sysid", "compid", "vehicle", "mode", "armed"], vehicles),
         "",
         _table("Errors (exceptions caught, by component)", ["component", "count"], errors),
+        "",
+        _table("Counters (routing, vehicles' services)", ["counter", "count"], counters),
     ]
     rejects = {c["name"]: c["signature_reject_reasons"] for c in chans if c.get("signature_reject_reasons")}
     if rejects:

@@ -29,15 +29,16 @@ import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from . import __version__, control
+from .autopilot.core import DEFAULT_SIM_PERIOD_S
 from .boundary import ErrorCounts
 from .channel import Channel, Peer
 from .clock import Clock
 from .codec import Frame
 from .config import Config
 from .config_mqtt import route_capacity
-from .node import VehicleNode
 from .msgids import HEARTBEAT as MSG_ID_HEARTBEAT
 from .msgids import is_radio
+from .node import VehicleNode
 from .router import MAX_ROUTES, Router, RouteTable
 from .services.ftp import FtpService
 from .services.signing import SigningService
@@ -49,7 +50,6 @@ from .vehicles import vehicle_type
 log = structlog.get_logger("gcsd.gcs")
 
 STATS_INTERVAL_S = 10.0
-SIM_TICK_S = 0.04  # the simulation task's period when no node asks for less (SIM_RATE_HZ 25)
 IDLE_NODE_PASS_S = 0.5  # a node with nothing scheduled still gets a pass this often (its simulation steps)
 
 
@@ -101,6 +101,7 @@ class GCS:
         for ch in self.channels:
             ch.verify = functools.partial(self._verify, ch)
             ch.on_frame = self.on_frame
+            ch.errors = self.errors
             ch.on_reject = self._reject
             ch.on_bad_crc = self.on_bad_crc
             ch.on_peer_joined = self.on_peer_joined
@@ -125,12 +126,8 @@ class GCS:
                              self.clock.wall())
 
     def on_frame(self, channel: Channel, frame: Frame, now: float) -> None:
-        try:
-            self._route(channel, frame, now)
-        except Exception:
-            self.errors.failed("receive", now, channel=channel.name, msg=frame.name, sysid=frame.sysid)
-
-    def _route(self, channel: Channel, frame: Frame, now: float) -> None:
+        """Route one accepted frame and hand it to the local components it is for (inside the
+        channel's receive boundary)."""
         msgid = frame.msgid
         if channel.index not in self.active and not is_radio(msgid):
             self.active.add(channel.index)
@@ -267,16 +264,17 @@ class GCS:
             now = self.clock.now()
             for node in self.nodes:
                 node.step(now)  # guarded inside
-            period = min((n.sim.period_s for n in self.nodes), default=SIM_TICK_S)
+            period = min((n.sim.period_s for n in self.nodes), default=DEFAULT_SIM_PERIOD_S)
             await asyncio.sleep(max(0.001, period - (self.clock.now() - now)))
 
     async def _save_signing_timestamp(self) -> None:
         while True:
             await asyncio.sleep(SAVE_INTERVAL_S)
-            try:
-                self.signing_manager.save_if_changed()
-            except OSError as exc:
-                log.error("signing_save_failed", error=str(exc))
+            with self.errors.guard("signing_save", self.clock.now()):
+                try:
+                    self.signing_manager.save_if_changed()
+                except OSError as exc:
+                    log.error("signing_save_failed", error=str(exc))
 
     async def _log_stats(self) -> None:
         last = {ch.name: ch.snapshot() for ch in self.channels}
@@ -284,17 +282,23 @@ class GCS:
             for _ in range(int(STATS_INTERVAL_S)):
                 await asyncio.sleep(1.0)
                 if self.tlog is not None:
-                    self.tlog.flush()
-            for ch in self.channels:
-                snap = ch.snapshot()
-                prev = last[ch.name]
-                self._rates[ch.name] = (
-                    (snap["packets_in"] - prev["packets_in"]) / STATS_INTERVAL_S,
-                    (snap["packets_out"] - prev["packets_out"]) / STATS_INTERVAL_S,
-                )
-                last[ch.name] = snap
-                log.info("channel_stats", channel=ch.name, **snap)
-            log.info("routes_learned", routes=len(self.router.table), not_learned=self.router.table.not_learned)
+                    with self.errors.guard("tlog", self.clock.now()):
+                        self.tlog.flush()
+            with self.errors.guard("stats", self.clock.now()):
+                self._stats_pass(last)
+
+    def _stats_pass(self, last: dict[str, dict[str, int]]) -> None:
+        """The 10-second stats line and the packet rates `gcsd status` shows."""
+        for ch in self.channels:
+            snap = ch.snapshot()
+            prev = last[ch.name]
+            self._rates[ch.name] = (
+                (snap["packets_in"] - prev["packets_in"]) / STATS_INTERVAL_S,
+                (snap["packets_out"] - prev["packets_out"]) / STATS_INTERVAL_S,
+            )
+            last[ch.name] = snap
+            log.info("channel_stats", channel=ch.name, **snap)
+        log.info("routes_learned", routes=len(self.router.table), not_learned=self.router.table.not_learned)
 
     def stats(self) -> dict[str, dict[str, int]]:
         return {ch.name: ch.snapshot() for ch in self.channels}
@@ -323,7 +327,17 @@ class GCS:
             for n in self.nodes
         ]
         return {"version": __version__, "uptime_s": now - self.started_s, "channels": channels,
-                "routes": routes, "vehicles": vehicles, "errors": self.errors.snapshot()}
+                "routes": routes, "vehicles": vehicles, "errors": self.errors.snapshot(),
+                "counters": self.counters()}
+
+    def counters(self) -> dict[str, int]:
+        """Counted events outside the channels: routing's, and every vehicle's summed."""
+        out = {"routes_not_learned": self.router.table.not_learned,
+               "unknown_ids_dropped": self.router.unknown_dropped, "bad_crc_forwarded": self.bad_crc_forwarded}
+        for node in self.nodes:
+            for name, n in node.counters().items():
+                out[name] = out.get(name, 0) + n
+        return dict(sorted(out.items()))
 
 
 def _peer_name(key: object) -> str:

@@ -61,7 +61,7 @@ import paho.mqtt.client as paho
 import structlog
 from paho.mqtt.enums import CallbackAPIVersion, MQTTErrorCode
 
-from .codec import MESSAGE_INFO, STX_V1, STX_V2
+from .codec import MAX_FRAME_BYTES, MESSAGE_INFO, STX_V1, STX_V2
 from .config_mqtt import MqttConfig
 
 log = structlog.get_logger("gcsd.mqtt")
@@ -71,7 +71,7 @@ CONNECT_TIMEOUT_S = 5.0  # TCP + TLS handshake
 CONNACK_TIMEOUT_S = 10.0  # CONNACK and SUBACK
 MAX_PENDING_FRAMES = 4096  # published but not yet written to the socket (about 1 MB): beyond, drop
 DRAIN_BATCH = 256  # MQTT packets read per readiness event
-MAX_PAYLOAD_BYTES = 4 * 280  # one frame is at most 280 bytes; a bigger payload is dropped unparsed
+MAX_PAYLOAD_BYTES = 4 * MAX_FRAME_BYTES  # one frame is at most 280 bytes; a bigger payload is dropped unparsed
 MAX_SYSID = 255
 
 
@@ -157,7 +157,6 @@ class MqttLink:
         # per QoS 0 message for that callback, a quarter of the publishing cost.)
         self.pending = 0
         self._delivered = 0
-        self.receive_errors = 0
         self._connack: asyncio.Future | None = None
         self._suback: dict[int, asyncio.Future] = {}
         self._fd = -1
@@ -300,13 +299,10 @@ class MqttLink:
         if len(payload) > MAX_PAYLOAD_BYTES or (self.ground and not _source_matches(message.topic, payload)):
             peer.parser.stats.parse_errors += 1  # not what this link carries: dropped unparsed
             return
-        try:
-            channel.receive(peer, payload, channel.clock(), datagram=True)
-        except Exception:  # paho would swallow it silently (suppress_exceptions): say so, carry on
-            self.receive_errors += 1
-            if self.receive_errors <= 10 or self.receive_errors % 1000 == 0:
-                log.exception("mqtt_receive_failed", channel=channel.name, topic=message.topic,
-                              errors=self.receive_errors)
+        now = channel.clock()
+        # paho would swallow an exception silently (suppress_exceptions): the daemon's boundary counts it
+        with channel.errors.guard("mqtt_receive", now, channel=channel.name, topic=message.topic):
+            channel.receive(peer, payload, now, datagram=True)
 
     def _write(self, raw: bytes) -> bool:
         """The peer writer: one frame, one message, on the topic the frame's header selects."""

@@ -74,7 +74,9 @@ class VehicleNode:
                                           clock.now())
         self.param_service.load(config.params_file)
         # write-behind of mav.parm: coalesced, on a worker thread, flushed by close()
-        self.param_writer = WriteBehind(self.param_service.save_path, self.param_service, clock.now)
+        self.errors = errors if errors is not None else ErrorCounts()
+        self.param_writer = WriteBehind(self.param_service.save_path, self.param_service, clock.now,
+                                        errors=self.errors)
         self.param_service.on_dirty = self.param_writer.kick
         self.params.set("STAT_BOOTCNT", self.params.get("STAT_BOOTCNT") + 1, force=True)
         self.sysid = int(self.params.get("SYSID_THISMAV"))
@@ -86,7 +88,6 @@ class VehicleNode:
         self.state = initial_state(vehicle, vcfg.home, index, capacity)
         self.sim = Autopilot(self, backend, now, vcfg.speedup)  # the vehicle: autopilot over a backend
         self.statustext = StatusTextQueue()
-        self.errors = errors if errors is not None else ErrorCounts()
         self._sim_component = "sim" if self.sim.simulated else "backend"
         self._wake = wake
         self.links = [Link(ch, now, self._producible, lambda ch=ch: wake(ch)) for ch in channels]
@@ -104,10 +105,7 @@ class VehicleNode:
         self.mission = MissionService(self, config.mission, self.state_dir)
         self.add_service(self.mission)
         attach_services(self, config)
-        try:
-            self.param_service.save()  # the boot count
-        except OSError as exc:
-            log.error("params_save_failed", error=str(exc))
+        self.param_service.save()  # the boot count
 
     def _build_dispatch(self) -> None:
         self.handlers: dict[str, Callable[[Incoming], None]] = {}
@@ -156,6 +154,13 @@ class VehicleNode:
         """Flush state at a clean stop (waits for a parameter write in flight, writes the rest)."""
         self.param_writer.flush()
 
+    def counters(self) -> dict[str, int]:
+        """This vehicle's counted events for `gcsd status` (its services' and the text queue's)."""
+        out = {"statustext_dropped": self.statustext.dropped}
+        for service in self.services:
+            out.update(service.counters())
+        return out
+
     # --- identity and time -----------------------------------------------------------------
     def capabilities(self) -> int:
         caps = self.vehicle.capabilities
@@ -169,7 +174,8 @@ class VehicleNode:
     def time_usec(self, now: float) -> int:
         return int(self.clock.since_boot(now) * 1e6)
 
-    def parse_error_count(self) -> int:
+    def comm_error_count(self) -> int:
+        """SYS_STATUS.errors_comm: frames not sent for lack of budget or buffer, on every channel."""
         return sum(ch.stats.drops for ch in self.channels) & 0xFFFF
 
     def _producible(self, msgid: int) -> bool:

@@ -16,7 +16,8 @@ and `persist_failed(error)` take the outcome. This adapter only does the I/O:
 With no running loop (a node built outside asyncio: the unit-test harness, a script) there is
 nothing to block: `kick` writes at once, synchronously, when the file is due, and otherwise
 leaves it to the next `kick` or to `flush`. Errors never escape: a failed write goes to the
-source, which retries.
+source, which retries; an exception in the timer or completion callback (the source's own
+code) is counted by the daemon's boundary as "persist:<file>" and the next `kick` re-arms.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from typing import Protocol
 import structlog
 
 from .atomic import write_atomic
+from .boundary import ErrorCounts
 
 log = structlog.get_logger("gcsd.persist")
 
@@ -43,8 +45,10 @@ class PersistSource(Protocol):
 
 class WriteBehind:
     def __init__(self, path: Path, source: PersistSource, now: Callable[[], float],
-                 write: Callable[[Path, str], None] | None = None) -> None:
+                 write: Callable[[Path, str], None] | None = None, errors: ErrorCounts | None = None) -> None:
         self.path = path
+        self.errors = errors if errors is not None else ErrorCounts()
+        self._component = f"persist:{path.name}" if path is not None else "persist"
         self.source = source
         self._now = now
         self._write = write or write_atomic
@@ -71,6 +75,10 @@ class WriteBehind:
 
     def _due(self) -> None:
         self._timer = None
+        with self.errors.guard(self._component, self._now(), path=str(self.path)):
+            self._start_write()
+
+    def _start_write(self) -> None:
         text = self.source.take_persist(self._now())
         if text is None:  # woke a little early, or nothing left
             self.kick()
@@ -85,8 +93,9 @@ class WriteBehind:
         if fut is not self._inflight:  # flush() already took care of it
             return
         self._inflight = None
-        self._outcome(fut.exception())
-        self.kick()
+        with self.errors.guard(self._component, self._now(), path=str(self.path)):
+            self._outcome(fut.exception())
+            self.kick()
 
     def _outcome(self, error: BaseException | None) -> None:
         if error is None:

@@ -43,7 +43,7 @@ def sys_status(node, channel, now):
     if battery_monitored(node):
         volts_mv, current_ca, remaining = int(s.battery_voltage_v * 1000), int(s.current_a * 100), s.battery_remaining_pct
     return M.MAVLink_sys_status_message(
-        present, enabled, healthy, 100, volts_mv, current_ca, remaining, 0, node.parse_error_count(), 0, 0, 0, 0,
+        present, enabled, healthy, 100, volts_mv, current_ca, remaining, 0, node.comm_error_count(), 0, 0, 0, 0,
     )
 
 

@@ -1,9 +1,9 @@
 """asyncio adapters: sockets and serial ports in, bytes to a Channel; one task per channel.
 
-Each channel runs `run_channel(channel, send_pass, stopping)`: it opens the transport (retrying
-with capped exponential backoff for clients and serial ports), then loops calling
+Each channel runs `run_channel(channel, send_pass, wakeup, opened, on_error)`: it opens the
+transport (retrying with capped exponential backoff for clients and serial ports), then loops calling
 `send_pass(channel, now)` (the GCS's deferred scheduler pass), sleeping until the deadline it
-returns or until woken (`wake(channel)`, for pushed messages). Receiving happens in protocol
+returns or until `wakeup` is set (something was queued). Receiving happens in protocol
 callbacks, which hand bytes to `Channel.receive`.
 
 Errors are events, never crashes: a refused connection, a vanished serial device or a full

@@ -290,7 +290,7 @@ def test_high_latency_links_are_silent_until_control_high_latency(tmp_path):
     h = Harness(tmp_path, config={"channels": [{"name": "sat", "type": "udp-server", "address": "127.0.0.1:0",
                                                 "options": ["high_latency"]}]})
     h.run(6)
-    assert h.received == [] and h.channel.muted_frames > 0
+    assert h.received == [] and h.channel.stats.muted > 0
     assert h.command(M.MAV_CMD_CONTROL_HIGH_LATENCY, 1) == ACCEPTED
     h.run(10.5)
     kinds = {m.get_type() for m in h.received}

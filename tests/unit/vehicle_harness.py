@@ -5,7 +5,7 @@ services, autopilot, simulation) from YAML-equivalent configuration, with a Cloc
 is a float the test advances. Messages from the "ground station" (sysid 255) go in through the
 node's dispatch (`send`, `command`); everything the node sends on the channel is decoded with
 pymavlink and kept (`received`, `texts()`, `last(type)`). `run(seconds)` advances the clock in
-steps, running the node's send pass (which steps the simulation) each time.
+steps, stepping the simulation (`node.step`) and running the node's send pass each time.
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
 """The autopilot of a vehicle node: modes, guided targets, missions, RTL, landing, failsafes.
 
-Theory of operation. `step(now)` runs from the node's send pass; at most SIM_RATE_HZ times a
+Theory of operation. `step(now)` runs from the daemon's simulation task (gcs.py `_simulate`,
+independent of the links); at most SIM_RATE_HZ times a
 real second it advances simulated time by the real time elapsed x SIM_SPEEDUP, cut into ticks
 of at most MAX_STEP_S. Each tick: notice mode and arming changes made by services (entering a
 mode sets up its behaviour: RTL picks its destination, AUTO resumes the mission, LAND fixes
@@ -41,6 +42,7 @@ from .settings import Behaviour as B
 log = structlog.get_logger("gcsd.autopilot")
 
 MAX_CATCH_UP_S = 30.0  # simulated seconds per step at most (after a stall)
+DEFAULT_SIM_PERIOD_S = 0.04  # SIM_RATE_HZ 25, for a vehicle type without the parameter
 TAKEOFF_TOLERANCE_M = 1.0
 
 
@@ -55,7 +57,7 @@ class Autopilot(Actions):
             backend = SimulatedVehicle(node.vehicle.dynamics(), environment(node.params.get))
         self.backend = backend
         self.speedup = float(self.params.get("SIM_SPEEDUP")) if "SIM_SPEEDUP" in self.params else speedup
-        self.period_s = 1.0 / float(self.params.get("SIM_RATE_HZ")) if "SIM_RATE_HZ" in self.params else 0.04
+        self.period_s = 1.0 / float(self.params.get("SIM_RATE_HZ")) if "SIM_RATE_HZ" in self.params else DEFAULT_SIM_PERIOD_S
         self._last_s = now
         self._dirty = True
         self._reload()

@@ -3,7 +3,8 @@
 It takes decoded requests from an `Origin` (sysid, compid, the opaque channel they came on, and
 whether that link speaks MAVLink1) and returns what to do: `Send(channel, msg)`, `Text(...)`
 and `PlanChanged` when the store's plan was replaced. `tick(now)` runs the timers and
-`next_deadline()` says when it next needs to. It never touches a socket, a file or a clock.
+`next_deadline()` says when it next needs to. It never touches a socket or a clock; the plan
+is written by the saver its owner injects (MissionService), before the ACK is sent.
 
 States and transitions (REFERENCE.md 7.1, with SPEC.md's improvements marked *):
 

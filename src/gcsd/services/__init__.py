@@ -33,6 +33,10 @@ class Service:
     def commands(self) -> dict[int, Callable]:
         return {}
 
+    def counters(self) -> dict[str, int]:
+        """Counted events `gcsd status` shows (summed over a swarm's vehicles), e.g. drops."""
+        return {}
+
     def message_handlers(self) -> dict[str, Callable[[Incoming], None]]:
         return {
             name[len("handle_"):]: getattr(self, name)

@@ -79,6 +79,9 @@ class CommandService(Service):
         self.unsupported = 0
         self.refused = 0  # commands refused by the edge check
 
+    def counters(self) -> dict[str, int]:
+        return {"commands_unsupported": self.unsupported, "commands_refused": self.refused}
+
     def handle_COMMAND_LONG(self, inc: Incoming) -> None:
         m = inc.msg
         cmd = m.command
@@ -111,11 +114,10 @@ class CommandService(Service):
             return
         p1, p2, p3, p4, x, y, z = checked
         req = replace(req, params=(p1, p2, p3, p4), x=x, y=y, z=z)
-        try:
+        result = M.MAV_RESULT_FAILED  # what the ground station hears if the handler raises
+        with self.node.errors.guard(f"command:{req.command}", req.inc.now, channel=req.inc.channel.name,
+                                    sysid=req.inc.frame.sysid):
             result = handler(req)
-        except Exception:
-            log.exception("command_failed", command=req.command, channel=req.inc.channel.name)
-            result = M.MAV_RESULT_FAILED
         self._ack(req.inc, req.command, result)
 
     def _ack(self, inc: Incoming, command: int, result: int) -> None:

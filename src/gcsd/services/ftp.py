@@ -54,10 +54,7 @@ class NodeParams:
         return self.node.param_service.set_from_file(name, value, save=False)
 
     def commit(self) -> None:
-        try:
-            self.node.param_service.save()
-        except OSError as exc:
-            log.error("params_save_failed", error=str(exc))
+        self.node.param_service.save()
 
     def downloaded(self) -> None:
         self.node.send_banner()
@@ -77,6 +74,9 @@ class FtpService(Service):
         self._next_burst_s: dict[int, float] = {}
         self.replies_dropped = 0
         log.info("ftp_root_opened", root=str(self.server.fs.root), max_file_bytes=max_file_bytes)
+
+    def counters(self) -> dict[str, int]:
+        return {"ftp_replies_dropped": self.replies_dropped}
 
     def handle_FILE_TRANSFER_PROTOCOL(self, inc: Incoming) -> None:
         channel = inc.channel

@@ -208,10 +208,7 @@ class MaintenanceService(Service):
             self._save_params()
 
     def _save_params(self) -> None:
-        try:
-            self.node.param_service.save()
-        except OSError as exc:
-            log.error("params_save_failed", error=str(exc))
+        self.node.param_service.save()
 
     def storage_format(self, req: CommandRequest) -> int:
         if req.param1 != 1 or req.param2 != 1:
@@ -251,10 +248,7 @@ class MaintenanceService(Service):
         for entry in list(store.entries()):
             if not store.definition(entry.name).read_only:
                 store.set(entry.name, entry.default, force=True)
-        try:
-            self.node.param_service.save()
-        except OSError:
-            return FAILED
+        self.node.param_service.save()  # a failed write is reported later, as "Param save failed"
         self.node.send_text(M.MAV_SEVERITY_WARNING, "All parameters reset to defaults")
         return ACCEPTED
 
@@ -277,10 +271,7 @@ class MaintenanceService(Service):
         self.node.sim.reboot()
         store = self.node.params
         store.set("STAT_BOOTCNT", store.get("STAT_BOOTCNT") + 1, force=True)
-        try:
-            self.node.param_service.save()
-        except OSError as exc:
-            log.error("params_save_failed", error=str(exc))
+        self.node.param_service.save()
         self.node.send_banner()
 
     def run_prearm_checks(self, req: CommandRequest) -> int:
