@@ -7,7 +7,15 @@ import math
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.http.mavjson import BadMessage, UnknownMessage, message_json, parse_envelope, parse_message, template
+from gcsd.codec import FrameParser
+from gcsd.http.mavjson import (
+    BadMessage,
+    UnknownMessage,
+    message_json,
+    parse_envelope,
+    parse_message,
+    template,
+)
 from gcsd.http.tree import MessageTree
 
 # README.md, "GET /v1/helper/mavlink?name=HEARTBEAT", with base_mode in the {"bits": N} form SPEC pins
@@ -160,7 +168,7 @@ def test_other_accepted_forms():
 
 def test_tree_pretty_heartbeat_has_the_shape_tests_run_py_counts():
     tree = MessageTree()
-    tree.update(1, 1, M.MAVLink_heartbeat_message(2, 3, 0x51, 4, 3, 3), 1000.0)
+    tree.update(1, 1, "HEARTBEAT", M.MAVLink_heartbeat_message(2, 3, 0x51, 4, 3, 3), 1000.0)
     doc = tree.document(["vehicles", "1", "components", "1", "messages", "HEARTBEAT"])
     assert json.dumps(doc, indent=2).count("\n") == 26  # mavlink2rest tests/run.py "Test pretty"
 
@@ -169,7 +177,7 @@ def test_tree_counts_and_frequency_and_times():
     tree = MessageTree()
     att = M.MAVLink_attitude_message(1, 0.5, 0.1, 0.2, 0, 0, 0)
     for i in range(21):
-        tree.update(1, 1, att, 1000.0 + i * 0.1)
+        tree.update(1, 1, "ATTITUDE", att, 1000.0 + i * 0.1)
     status = tree.document(["vehicles", "1", "components", "1", "messages", "ATTITUDE", "status", "time"])
     assert status["counter"] == 21
     assert status["frequency"] == pytest.approx(21 / 2.0)
@@ -187,7 +195,8 @@ def test_tree_counts_and_frequency_and_times():
                                   ["vehicles", "1", "id", "x"]])
 def test_tree_unknown_paths_are_key_errors(path):
     tree = MessageTree()
-    tree.update(1, 1, M.MAVLink_attitude_message(1, 0.5, 0.1, 0.2, 0, 0, 0), 5.0)
+    tree.update(1, 1, "ATTITUDE", FrameParser().feed(M.MAVLink_attitude_message(1, 0.5, 0.1, 0.2, 0, 0, 0).pack(M.MAVLink(None)))[0], 5.0)
+    assert tree.document(["vehicles", "1", "components", "1", "messages", "ATTITUDE", "message", "roll"]) == 0.5
     with pytest.raises(KeyError):
         tree.document(path)
 
@@ -195,6 +204,6 @@ def test_tree_unknown_paths_are_key_errors(path):
 def test_tree_is_bounded_by_components():
     tree = MessageTree(max_components=3)
     for compid in range(5):
-        tree.update(1, compid, M.MAVLink_attitude_message(1, 0, 0, 0, 0, 0, 0), 1.0)
+        tree.update(1, compid, "ATTITUDE", M.MAVLink_attitude_message(1, 0, 0, 0, 0, 0, 0), 1.0)
     assert len(tree.document(["vehicles", "1", "components"])) == 3
     assert tree.components_refused == 2

@@ -190,7 +190,7 @@ def parse_envelope(document: object):
         raise BadMessage("expected an object with 'header' and 'message'")
     unknown = set(document) - {"header", "message"}
     if unknown:
-        raise BadMessage(f"unknown key {sorted(unknown)[0]!r} (expected 'header' and 'message')")
+        raise BadMessage(f"unknown key {min(unknown)!r} (expected 'header' and 'message')")
     header = parse_header(document.get("header"))
     return header, parse_message(document.get("message"))
 
@@ -206,7 +206,7 @@ def parse_header(header: object) -> Header:
         values.append(_int(value, "uint8_t", f"header.{key}"))
     unknown = set(header) - {"system_id", "component_id", "sequence"}
     if unknown:
-        raise BadMessage(f"header: unknown key {sorted(unknown)[0]!r}")
+        raise BadMessage(f"header: unknown key {min(unknown)!r}")
     return Header(*values)
 
 

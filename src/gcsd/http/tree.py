@@ -9,8 +9,9 @@ and last_update are ISO 8601 with the local zone; frequency = counter / seconds 
 (`vehicles/1/components/1/messages/ATTITUDE/message/roll`); a path that names nothing is
 `KeyError` (gcsd answers 404 where mavlink2rest answers 200 "None").
 
-An update stores the pymavlink message as it is; it is converted to JSON only when a path
-reaches it, so a message nobody reads costs a dictionary store. Bounded: at most
+An update stores the pymavlink message, or the received Frame, as it is; a Frame is decoded and
+anything converted to JSON only when a path reaches it, so a routed frame nobody reads costs a
+dictionary store and no decoding. Bounded: at most
 MAX_COMPONENTS (sysid, compid) pairs (a peer inventing sources gets nothing more; counted in
 `components_refused`); names are the dialect's, so each component holds at most one entry per
 message type. Time is passed in (`wall_s`, seconds since the epoch); nothing here reads a clock.
@@ -18,15 +19,16 @@ message type. Time is passed in (`wall_s`, seconds since the epoch); nothing her
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
+from ..codec import Frame
 from .mavjson import message_json
 
 MAX_COMPONENTS = 512
 
 
 def iso_time(wall_s: float) -> str:
-    return datetime.fromtimestamp(wall_s, timezone.utc).astimezone().isoformat()
+    return datetime.fromtimestamp(wall_s, UTC).astimezone().isoformat()
 
 
 class Entry:
@@ -47,8 +49,12 @@ class Entry:
             "last_update": iso_time(self.last_s),
         }}
 
+    def message(self):
+        msg = self.msg
+        return msg.msg if isinstance(msg, Frame) else msg
+
     def document(self) -> dict:
-        return {"message": message_json(self.msg), "status": self.status()}
+        return {"message": message_json(self.message()), "status": self.status()}
 
 
 class MessageTree:
@@ -58,7 +64,8 @@ class MessageTree:
         self.max_components = max_components
         self.components_refused = 0
 
-    def update(self, sysid: int, compid: int, msg, wall_s: float) -> None:
+    def update(self, sysid: int, compid: int, name: str, msg, wall_s: float) -> None:
+        """`msg`: a pymavlink message or a Frame of a known message id, decoded when read."""
         components = self._systems.get(sysid)
         messages = components.get(compid) if components is not None else None
         if messages is None:
@@ -67,7 +74,6 @@ class MessageTree:
                 return
             self._components += 1
             messages = self._systems.setdefault(sysid, {}).setdefault(compid, {})
-        name = msg.get_type()
         entry = messages.get(name)
         if entry is None:
             messages[name] = Entry(msg, wall_s)
