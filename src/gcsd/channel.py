@@ -45,7 +45,7 @@ from dataclasses import dataclass, fields
 from typing import Protocol
 
 from .boundary import ErrorCounts
-from .codec import MAX_FRAME_BYTES, Encoder, Frame, FrameParser, MAVLink_message, ParseStats
+from .codec import MAX_FRAME_BYTES, STX_V2, Encoder, Frame, FrameParser, MAVLink_message, ParseStats
 from .config import ChannelConfig
 from .filters import counters as gate_counters
 from .filters import gates
@@ -73,6 +73,8 @@ class ChannelStats:
     peers_forgotten: int = 0  # silent for UDP_PEER_TIMEOUT_S
     peers_replaced: int = 0  # dropped for a new peer when max_peers were served
     muted: int = 0  # frames discarded while a high-latency link's output is disabled
+    spoofed_dropped: int = 0  # frames of a payload with a frame from a source its link may not carry (mqtt)
+    retained_dropped: int = 0  # retained MQTT messages: stored by the broker, not sent now; never acted on
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -123,6 +125,10 @@ class TokenBucket:
         """How long until nbytes may be sent."""
         self._refill(now)
         return max(0.0, (nbytes - self.tokens) / self.rate_bps)
+
+
+def _source_of(raw: bytes) -> int:
+    return raw[5] if raw[0] == STX_V2 else raw[3]
 
 
 def _accept_all(frame: Frame) -> str | None:
@@ -251,11 +257,16 @@ class Channel:
         return self.forget_silent_peers(now)
 
     # --- receive ---------------------------------------------------------------------------
-    def receive(self, peer: Peer, data: bytes, now: float, datagram: bool = False) -> None:
+    def receive(self, peer: Peer, data: bytes, now: float, datagram: bool = False,
+                source_sysid: int | None = None) -> None:
+        """With `source_sysid` (an mqtt ground side: the S of T/up/S/C), every frame the parser
+        finds must come from that system, or the whole payload is dropped (`spoofed_dropped`)."""
         parser = peer.parser
         frames = parser.feed(data)
         if datagram and parser.pending_bytes():
             parser.reset()  # a datagram holds whole frames; the rest was truncated
+        if source_sysid is not None and self._spoofed(parser, frames, source_sysid):
+            return
         if parser.bad_crc_frames:
             bad, parser.bad_crc_frames = parser.bad_crc_frames, []
             if peer.admitted:  # never relay what an unknown source sent
@@ -283,6 +294,18 @@ class Channel:
                 on_frame(self, frame, now)
             except Exception:
                 self.errors.failed("receive", now, channel=self.name, msg=frame.name, sysid=frame.sysid)
+
+    def _spoofed(self, parser: FrameParser, frames: list[Frame], source_sysid: int) -> bool:
+        """Checked on what the parser found (not on the payload's first bytes): a frame hidden
+        behind garbage, a second frame, or one inside a frame that failed its CRC counts too."""
+        bad = parser.bad_crc_frames
+        if all(f.sysid == source_sysid for f in frames) and all(_source_of(raw) == source_sysid for raw in bad):
+            return False
+        parser.bad_crc_frames = []
+        self.stats.spoofed_dropped += len(frames) + len(bad)
+        self._rejected_frames += len(frames)
+        self._rejected_bytes += sum(len(f.raw) for f in frames)
+        return True
 
     # --- send ------------------------------------------------------------------------------
     def encoder(self, sysid: int, compid: int, mavlink1: bool = False) -> Encoder:

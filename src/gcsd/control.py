@@ -160,6 +160,10 @@ def same_file(a: str | None, b: str | os.PathLike) -> bool:
 # --- the tables -------------------------------------------------------------------------------
 
 
+# counters of what a peer or a broker sent that was dropped on purpose (issue 17), as table columns
+_DROP_COLUMNS = (("spoofed_dropped", "spoofed"), ("retained_dropped", "retained"))
+
+
 def _table(title: str, headers: list[str], rows: list[list]) -> str:
     if not rows:
         return f"{title}: none"
@@ -204,7 +208,7 @@ def format_status(status: dict, daemon: dict | None = None) -> str:
         [c["name"], c.get("parse_errors", 0), c.get("crc_errors", 0), c.get("unknown_ids", 0), c.get("seq_gaps", 0),
          c.get("drops", 0), c.get("signature_rejects", 0), c.get("peers_forgotten", 0), c.get("peers_replaced", 0),
          c.get("filtered_in", 0), c.get("filtered_out", 0), c.get("rate_limited", 0), c.get("duplicates", 0),
-         c.get("muted", 0)]
+         c.get("muted", 0), *(c.get(key, 0) for key, _ in _DROP_COLUMNS)]
         for c in chans
     ]
     routes = [[r["sysid"], r["compid"], mav_type_name(r.get("mavtype")), r["channel"], f'{r["age_s"]:.1f}']
@@ -225,7 +229,8 @@ def format_status(status: dict, daemon: dict | None = None) -> str:
         _table("Channel errors and drops (counts)", ["channel", "parse", "bad CRC", "unknown id", "seq gaps",
                                                      "drops", "signing rejects", "peers expired",
                                                      "peers replaced", "filtered in", "filtered out",
-                                                     "rate limited", "duplicates", "muted"], problems),
+                                                     "rate limited", "duplicates", "muted", *(h for _, h in _DROP_COLUMNS)],
+               problems),
         "",
         _table("Routes learned", ["sysid", "compid", "MAV_TYPE", "via channel", "last heard (s ago)"], routes),
         "",

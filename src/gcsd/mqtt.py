@@ -18,9 +18,17 @@ retained. Topics under the channel's `topic` prefix T:
 
 The broker is one peer of the channel while connected: the channel's counters count frames
 and bytes as for any link, a payload that is not whole frames is a parse error, and frames
-from every source go through the router. Also counted as parse errors and dropped unparsed: a
-payload over MAX_PAYLOAD_BYTES, and (role ground) a frame on T/up/S/C whose source is not S, so
-that broker ACLs giving each vehicle only its own up/S topic cannot be bypassed. Frames are
+from every source go through the router. Dropped and counted:
+- a payload over MAX_PAYLOAD_BYTES, unparsed (a parse error);
+- role ground: a message on T/up/S/C any of whose frames (every frame the parser finds in it,
+  after garbage or inside a frame with a bad CRC too) is not from system S: the whole message
+  (`spoofed_dropped`), so that broker ACLs giving each vehicle only its own up/S topic cannot
+  be bypassed;
+- a retained message (either role; `retained_dropped`): the broker stored it earlier and hands
+  it to every new subscriber, so a force-arm published once with the retain flag would be
+  executed at every later start with no ground station anywhere. gcsd never publishes retained
+  messages; a message published live with the flag reaches current subscribers with the flag
+  clear (MQTT 3.1.1, 3.3.1.3) and is handled as any other. Frames are
 published only while connected; a frame that finds the connection down, or more than
 MAX_PENDING_FRAMES not yet written to the socket, is a counted drop, never an unbounded queue.
 
@@ -61,7 +69,7 @@ import paho.mqtt.client as paho
 import structlog
 from paho.mqtt.enums import CallbackAPIVersion, MQTTErrorCode
 
-from .codec import MAX_FRAME_BYTES, MESSAGE_INFO, STX_V1, STX_V2
+from .codec import MAX_FRAME_BYTES, MESSAGE_INFO, STX_V2
 from .config_mqtt import MqttConfig
 
 log = structlog.get_logger("gcsd.mqtt")
@@ -96,13 +104,12 @@ def frame_target_system(raw: bytes) -> int:
     return raw[hlen + info.target_system_ofs]
 
 
-def _source_matches(topic: str, payload: bytes) -> bool:
-    """Role ground: a message on TOPIC/up/S/C must carry a frame from S (so a broker ACL that lets
-    each vehicle publish only under its own up/S is not bypassed by a spoofed source sysid)."""
-    if len(payload) < 6 or payload[0] not in (STX_V1, STX_V2):
-        return True  # not a frame: the parser counts it
-    sysid = payload[5] if payload[0] == STX_V2 else payload[3]
-    return topic.rsplit("/", 2)[-2] == str(sysid)
+def topic_source_sysid(topic: str) -> int | None:
+    """Role ground: the S of TOPIC/up/S/C, which every frame of the message must come from (so a
+    broker ACL that lets each vehicle publish only under its own up/S is not bypassed by a
+    spoofed source sysid); None when the topic has no number there (nothing can match it)."""
+    part = topic.rsplit("/", 2)[-2]
+    return int(part) if part.isdecimal() and len(part) <= 3 else None
 
 
 class Topics:
@@ -291,18 +298,27 @@ class MqttLink:
     # --- frames ----------------------------------------------------------------------------
     def _on_message(self, client, userdata, message) -> None:
         self._delivered += 1
+        channel = self.channel
+        if message.retain:  # stored by the broker earlier (a stale command), not sent now: never acted on
+            channel.stats.retained_dropped += 1
+            return
         peer = self.peer
         if peer is None:
             return
-        channel = self.channel
         payload = message.payload
-        if len(payload) > MAX_PAYLOAD_BYTES or (self.ground and not _source_matches(message.topic, payload)):
+        if len(payload) > MAX_PAYLOAD_BYTES:
             peer.parser.stats.parse_errors += 1  # not what this link carries: dropped unparsed
             return
+        source = None
+        if self.ground:
+            source = topic_source_sysid(message.topic)
+            if source is None:
+                channel.stats.spoofed_dropped += 1
+                return
         now = channel.clock()
         # paho would swallow an exception silently (suppress_exceptions): the daemon's boundary counts it
         with channel.errors.guard("mqtt_receive", now, channel=channel.name, topic=message.topic):
-            channel.receive(peer, payload, now, datagram=True)
+            channel.receive(peer, payload, now, datagram=True, source_sysid=source)
 
     def _write(self, raw: bytes) -> bool:
         """The peer writer: one frame, one message, on the topic the frame's header selects."""

@@ -422,7 +422,8 @@ def test_garbage_oversized_and_spoofed_messages_are_counted_and_dropped(broker, 
     assert heard_all(gcs, {(3, 1)}).get((3, 1)), "the ground side still routes the fleet"
     pump([gcs], 0.5)
     assert 9 not in {r.src[0] for r in gcs.since(mark, "HEARTBEAT")}, "the spoofed source was not routed"
-    assert ground.stats("fleet")["parse_errors"] >= before + 4
+    assert ground.stats("fleet")["parse_errors"] >= before + 3
+    assert ground.stats("fleet")["spoofed_dropped"] == 1
 
 
 def packed_heartbeat(sysid: int) -> bytes:

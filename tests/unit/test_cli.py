@@ -257,3 +257,15 @@ def test_status_of_a_socket_that_is_not_gcsd_exits_1_with_one_line(tmp_path, mon
     err = capsys.readouterr().err
     assert err.startswith(f"gcsd status: no daemon answers on {tmp_path / 'st' / 'gcsd.sock'} (")
     assert len(err.splitlines()) == 1 and "Traceback" not in err
+
+
+def test_status_table_shows_what_was_dropped_on_purpose():
+    from gcsd.control import format_status
+
+    channel = {**STATUS["channels"][0], "spoofed_dropped": 31, "retained_dropped": 32}
+    text = format_status({**STATUS, "channels": [channel]})
+    lines = text.splitlines()
+    at = lines.index("Channel errors and drops (counts)")
+    headers, row = lines[at + 1], lines[at + 3].split()
+    assert "spoofed" in headers and "retained" in headers
+    assert row[-2:] == ["31", "32"]
