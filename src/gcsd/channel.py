@@ -51,6 +51,7 @@ from .filters import counters as gate_counters
 from .filters import gates
 from .msgids import RADIO_IDS
 from .router import ChannelPolicy
+from .streamreq import StreamRequests
 
 UDP_PEER_TIMEOUT_S = 30.0
 PEER_SWEEP_INTERVAL_S = 1.0
@@ -142,7 +143,8 @@ class Channel:
         self.name = config.name
         self.clock = clock
         self.stats = ChannelStats()
-        self.policy = ChannelPolicy(private=config.private, no_forward="no_forward" in config.options)
+        self.policy = ChannelPolicy(private=config.private, no_forward="no_forward" in config.options,
+                                    group=config.group)
         self.peers: dict[object, Peer] = {}  # admitted: served
         self._waiting: dict[object, Peer] = {}  # stream connections not served yet
         self.max_peers = getattr(config, "max_peers", None) or DEFAULT_MAX_PEERS
@@ -160,7 +162,9 @@ class Channel:
         self._encoders: dict[tuple[int, int, bool], Encoder] = {}
         self._keep_bad_crc = "forward_bad_crc" in config.options
         self._strangers = FrameParser(ParseStats(), keep_bad_crc=False)  # datagrams from unknown addresses
-        self.unsigned_ok = "unsigned_ok" in config.options
+        # a signing gateway's own unsigned frames are accepted: they are what it signs (signgate.py)
+        self.sign_forwarded = "sign_forwarded" in config.options
+        self.unsigned_ok = "unsigned_ok" in config.options or self.sign_forwarded
         self.signing = None  # the process's Signing, set by the GCS; outgoing frames are signed when it has a key
         self.wall: Callable[[], float] = time.time
         self.signature_reject_reasons: dict[str, int] = {}
@@ -174,6 +178,7 @@ class Channel:
         self.output_enabled = "high_latency" not in config.options
         # companion routing (filters.py): None when the channel has no filter / no rate cap
         self.in_gate, self.out_gate = gates(config)
+        self.stream_requests = StreamRequests(config.request_streams) if config.request_streams else None
 
     # --- peers -----------------------------------------------------------------------------
     @property

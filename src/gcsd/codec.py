@@ -36,6 +36,7 @@ except ImportError:  # pragma: no cover
     def _crc16(data: bytes) -> int:
         return x25crc(data).crc
 
+crc16 = _crc16  # MAVLink's X.25 CRC, for the signing gateway (signgate.py), which re-frames
 MAVLink_message = mavlink.MAVLink_message
 STX_V1 = 0xFE
 MAX_FRAME_BYTES = 280  # MAVLink2: 10 header + 255 payload + 2 CRC + 13 signature

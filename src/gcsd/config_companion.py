@@ -78,7 +78,7 @@ class CompanionKeys:
     group: str | None = None
     filter: ChannelFilter = ChannelFilter()
     rate_limits: Mapping[int, float] = field(default_factory=lambda: MappingProxyType({}))
-    request_streams: float = 0.0
+    request_streams: int = 0
 
 
 def message_ids() -> dict[str, int]:
@@ -133,7 +133,7 @@ def read_companion(r, c, channel_type: str, address: tuple[str, int] | None, opt
     if "filter" in c:
         directions = r.section(c["filter"], ("in", "out"))
         filt = ChannelFilter(_rules(r, directions["in"], names), _rules(r, directions["out"], names))
-    request_hz = r.number(c["request_streams"], 0.0, 0, MAX_REQUEST_STREAMS_HZ)
+    request_hz = r.integer(c["request_streams"], 0, 0, MAX_REQUEST_STREAMS_HZ)
     if "sign_forwarded" in options:
         loopback = channel_type == "serial" or (address is not None and is_loopback_host(address[0]))
         if not loopback:

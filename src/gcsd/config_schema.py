@@ -112,7 +112,7 @@ class ChannelConfig:
     group: str | None = None  # channels of one group are redundant links to the same systems
     filter: ChannelFilter = field(default_factory=ChannelFilter)
     rate_limits: Mapping[int, float] = field(default_factory=dict)  # msgid -> Hz on this channel's output
-    request_streams: float = 0.0  # Hz: REQUEST_DATA_STREAM to each autopilot learned here; 0: never
+    request_streams: int = 0  # Hz: REQUEST_DATA_STREAM to each autopilot learned here; 0: never
 
     def __post_init__(self) -> None:
         if not self.bauds:

@@ -42,6 +42,7 @@ from .node import VehicleNode
 from .router import MAX_ROUTES, Router, RouteTable
 from .services.ftp import FtpService
 from .services.signing import SigningService
+from .signgate import signed_copy
 from .signing import SAVE_INTERVAL_S, SigningManager, SigningStore
 from .tlog import TlogWriter
 from .transport import ChannelStartError, run_channel
@@ -49,6 +50,7 @@ from .vehicles import vehicle_type
 
 log = structlog.get_logger("gcsd.gcs")
 
+MSG_ID_SYSTEM_TIME = 2
 STATS_INTERVAL_S = 10.0
 IDLE_NODE_PASS_S = 0.5  # a node with nothing scheduled still gets a pass this often (its simulation steps)
 
@@ -138,14 +140,40 @@ class GCS:
         )
         if decision.out_channels:
             raw = frame.raw
+            if channel.sign_forwarded and self.signing.key is not None:
+                raw = self._signed(channel, raw)
             channels = self.channels
             for index in decision.out_channels:
                 channels[index].write(raw)
+        if channel.stream_requests is not None and (msgid == MSG_ID_HEARTBEAT or msgid == MSG_ID_SYSTEM_TIME):
+            self._request_streams(channel, frame, now)
         if decision.process_locally and frame.known:
             for node in self._nodes_for(frame.target_system, frame.target_component):
                 node.handle(channel, frame, now)
                 for due in self._node_due:  # whatever it queued goes out at the next pass
                     due[node.index] = 0.0
+
+    def _signed(self, channel: Channel, raw: bytes) -> bytes:
+        """The signing gateway: an unsigned frame from a sign_forwarded channel, signed (signgate.py)."""
+        signed = signed_copy(raw, self.signing.key, channel.index, self.signing.next_timestamp(self.clock.wall()))
+        return raw if signed is None else signed
+
+    def _request_streams(self, channel: Channel, frame: Frame, now: float) -> None:
+        """request_streams: REQUEST_DATA_STREAM to an autopilot first heard or rebooted (streamreq.py)."""
+        msg, requests = frame.msg, channel.stream_requests
+        if msg is None:
+            return
+        if frame.msgid == MSG_ID_HEARTBEAT:
+            ask = requests.heartbeat(frame.sysid, frame.compid, msg.type, msg.autopilot, now)
+        else:
+            ask = requests.system_time(frame.sysid, frame.compid, msg.time_boot_ms)
+        if ask:
+            log.info("streams_requested", channel=channel.name, sysid=frame.sysid, compid=frame.compid,
+                     rate_hz=requests.rate_hz)
+            node = self.nodes[0]
+            channel.send_message(M.MAVLink_request_data_stream_message(
+                frame.sysid, frame.compid, M.MAV_DATA_STREAM_ALL, requests.rate_hz, 1),
+                node.sysid, node.compid)
 
     def _nodes_for(self, target_system: int, target_component: int) -> list[VehicleNode]:
         if target_system > 0:

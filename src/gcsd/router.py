@@ -22,6 +22,13 @@ channels?". It never touches a socket or a clock; `now` is passed in. Rules, in 
 8. Processed locally if it was addressed to us, or nothing was forwarded and the target system
    is ours, or it was a broadcast.
 
+Groups (SPEC.md "Companion routing"): channels with the same `group` are redundant links to the
+same systems (radio plus LTE to one flight controller). A route learned on one member is a route
+on every member, so a frame that would go out on one goes out on all of them (those without a
+peer write nothing); nothing received on a member goes back out on any member of its group (the
+systems behind it already have it). The same frame arriving on two members is dropped by the
+GCS's dedup (dedup.py) before it gets here.
+
 Unknown message ids (no target field can be read) are forwarded as broadcasts and not processed,
 but only from a source already learned from good frames on the same channel: their CRC cannot be
 checked, so noise on a link would otherwise create routes and be re-broadcast everywhere. They
@@ -54,6 +61,7 @@ class ChannelPolicy:
 
     private: bool = False
     no_forward: bool = False
+    group: str | None = None  # redundant links to the same systems (see "Groups")
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,6 +124,11 @@ class Router:
         self.policies = list(policies)
         self.table = table if table is not None else RouteTable()
         self.unknown_dropped = 0  # unknown-id frames from sources never seen with a good frame
+        # channel -> every channel of its group, itself included (only channels in a group)
+        self.members: dict[int, tuple[int, ...]] = {}
+        for ch, policy in enumerate(self.policies):
+            if policy.group is not None:
+                self.members[ch] = tuple(i for i, p in enumerate(self.policies) if p.group == policy.group)
 
     def decide(
         self,
@@ -143,7 +156,8 @@ class Router:
         if msgid == MSG_ID_HEARTBEAT:
             if closed_in:
                 return Decision(True)
-            return Decision(True, self._heartbeat_channels(in_channel, sysid, compid, active_channels))
+            out = self._heartbeat_channels(in_channel, sysid, compid, active_channels)
+            return Decision(True, self._grouped(out, in_channel) if self.members else out)
 
         broadcast_system = target_system <= 0
         broadcast_component = target_component <= 0
@@ -178,7 +192,7 @@ class Router:
             ):
                 out.append(ch)
         process = addressed_to_us or (not out and match_system) or broadcast_system
-        return Decision(process, tuple(out))
+        return Decision(process, self._grouped(out, in_channel) if self.members else tuple(out))
 
     def _unknown_message(self, in_channel: int, sysid: int, compid: int, now: float) -> Decision:
         policy = self.policies[in_channel]
@@ -187,6 +201,17 @@ class Router:
             return IGNORE
         self.table.learn(sysid, compid, in_channel, now)  # refresh only: the route exists
         return Decision(False, self.broadcast_channels(in_channel))
+
+    def _grouped(self, out, in_channel: int) -> tuple[int, ...]:
+        """`out` with each grouped channel widened to its whole group, minus the ingress group."""
+        members = self.members
+        skip = members.get(in_channel, (in_channel,))
+        result: list[int] = []
+        for ch in out:
+            for m in members.get(ch, (ch,)):
+                if m not in skip and m not in result and not self.policies[m].no_forward:
+                    result.append(m)
+        return tuple(result)
 
     def _local_compid(self, target_system: int, target_component: int, broadcast_system: bool) -> bool:
         if broadcast_system:
@@ -205,8 +230,9 @@ class Router:
         )
 
     def broadcast_channels(self, in_channel: int) -> tuple[int, ...]:
-        return tuple(
+        out = tuple(
             ch
             for ch in sorted(self.table.channels_with_routes())
             if ch != in_channel and not self.policies[ch].private and not self.policies[ch].no_forward
         )
+        return self._grouped(out, in_channel) if self.members else out

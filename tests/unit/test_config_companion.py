@@ -60,7 +60,7 @@ def test_an_unknown_message_name_is_a_problem_on_its_line_with_a_suggestion():
     ("rate_limits: {ATTITUDE: 0}\n", "c.yaml:5: channels[0].rate_limits.ATTITUDE: expected a number > 0 and <= 1000.0, got 0"),
     ("rate_limits: {NOPE: 5}\n", "c.yaml:5: channels[0].rate_limits.NOPE: unknown message 'NOPE' in the ardupilotmega dialect"),
     ("rate_limits: [ATTITUDE]\n", "c.yaml:5: channels[0].rate_limits: expected a mapping of message name or id to Hz, got a list"),
-    ("request_streams: 51\n", "c.yaml:5: channels[0].request_streams: expected a number 0..50, got 51"),
+    ("request_streams: 51\n", "c.yaml:5: channels[0].request_streams: expected an integer 0..50, got 51"),
     ("options: [sign_forwarded]\n", "c.yaml:5: channels[0].options: sign_forwarded is allowed only on serial"),
 ])
 def test_bad_companion_keys_are_file_line_key_path_problems(text, expected):
@@ -97,7 +97,7 @@ def test_a_baud_list_is_tried_in_order_and_the_first_sets_the_default_bandwidth(
 
 def test_group_request_streams_and_dedup():
     c = config(UDP + "group: fc\nrequest_streams: 4\n", "routing: {dedup_ms: 200}\n")
-    assert c.channels[0].group == "fc" and c.channels[0].request_streams == 4.0
+    assert c.channels[0].group == "fc" and c.channels[0].request_streams == 4
     assert c.routing.dedup_ms == 200
     assert problems(UDP, "routing: {dedup_ms: -1}\n") == [
         "c.yaml:5: routing.dedup_ms: expected an integer 0..10000, got -1"]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from gcsd.router import ChannelPolicy, Decision, RouteTable, Router
+from gcsd.router import ChannelPolicy, Decision, Router, RouteTable
 
 HB, CMD, RADIO_STATUS, PARAM_SET = 0, 76, 109, 23
 GCS1, GCS2, CAM, OTHER = (255, 190), (254, 190), (1, 100), (7, 1)
@@ -218,3 +218,35 @@ def test_unknown_message_from_an_unseen_source_is_dropped_and_not_learned():
 def test_unknown_message_from_a_private_channel_is_not_forwarded():
     router = make_router(PRIVATE_2)
     assert decide(router, 2, CAM, 42424, -1, -1, known=False) == Decision(False, ())
+
+
+# --- groups: redundant links to the same systems (SPEC.md "Companion routing") ---------------------
+# channel 0: a GCS; channels 1 and 2: radio and LTE to one flight controller (7, 1), group "fc";
+# channel 3: a second GCS.
+
+def grouped_router(fc_seen_on=(1,)) -> Router:
+    policies = [ChannelPolicy(), ChannelPolicy(group="fc"), ChannelPolicy(group="fc"), ChannelPolicy()]
+    router = Router({(1, 1)}, policies)
+    router.decide(0, HB, *GCS1, -1, -1, now=0.0, active_channels={0, 1, 2, 3})
+    router.decide(3, HB, *GCS2, -1, -1, now=0.0, active_channels={0, 1, 2, 3})
+    for ch in fc_seen_on:
+        router.decide(ch, HB, *OTHER, -1, -1, now=0.0, active_channels={0, 1, 2, 3})
+    return router
+
+
+def test_a_route_learned_on_one_link_of_a_group_is_a_route_on_every_link():
+    router = grouped_router(fc_seen_on=(1,))  # heard on the radio only
+    assert decide(router, 0, GCS1, CMD, 7, 1) == Decision(False, (1, 2))
+
+
+def test_nothing_from_a_group_goes_back_out_on_the_group():
+    router = grouped_router(fc_seen_on=(1, 2))
+    assert sorted(decide(router, 1, OTHER, CMD, 0, 0).out_channels) == [0, 3]  # broadcast from the FC
+    assert sorted(decide(router, 2, OTHER, HB, -1, -1).out_channels) == [0, 3]
+    assert decide(router, 1, OTHER, CMD, 255, 190) == Decision(False, (0,))  # reply to one GCS
+
+
+def test_a_broadcast_from_a_gcs_goes_to_every_link_of_the_group_once():
+    router = grouped_router(fc_seen_on=(2,))
+    got = decide(router, 0, GCS1, CMD, 0, 0)
+    assert got.process_locally and sorted(got.out_channels) == [1, 2, 3]
