@@ -39,10 +39,12 @@ wall clock. A new key forgets every stream; the same key again keeps the stream 
 so lowering the timestamp reopens no replay.
 
 Restart safety: the timestamp is saved (see SigningStore) every SAVE_INTERVAL_S and at a clean
-stop. At start the local timestamp becomes the saved one + 60 s, plus SAVE_INTERVAL_S when the
-last stop was not clean, so that no packet captured before the restart is inside the new-stream
-window: a replay across a restart is always refused. The saved timestamp also becomes the floor
-(a frame at or below it is one we may have accepted already). A saved timestamp beyond the bound
+stop. At start the saved timestamp, plus SAVE_INTERVAL_S when the last stop was not clean, is the
+floor for new streams (a frame at or below it is one the last run may have accepted): a replay
+across a restart is always refused. The local timestamp starts at the floor or the wall clock,
+whichever is later, and no further ahead: a start that pushed it 60 s past the saved one would
+have it saved that far ahead at the next stop, so two restarts within a minute made every ground
+station with a true clock `stale` for a minute per restart (found by tests/stateful). A saved timestamp beyond the bound
 above (written by an older version, or by a ground station's wrong clock) is repaired at load:
 the wall clock replaces it, and `load_repair` says so for the log.
 """
@@ -191,9 +193,10 @@ class SigningStore:
         write_atomic(self.path, text, mode=0o600)
 
     @staticmethod
-    def restart_timestamp(saved: SavedSigning) -> int:
-        # +1: a packet whose timestamp equals the saved one (it set it) is outside the window too
-        return saved.timestamp + WINDOW_UNITS + 1 + (0 if saved.clean else int(SAVE_INTERVAL_S * UNITS_PER_S))
+    def restart_floor(saved: SavedSigning) -> int:
+        """The highest timestamp the last run may have accepted: the saved one, plus what one save
+        interval could add after the last save when the stop was not clean."""
+        return saved.timestamp + (0 if saved.clean else int(SAVE_INTERVAL_S * UNITS_PER_S))
 
 
 class SigningManager:
@@ -218,10 +221,9 @@ class SigningManager:
         if saved is not None and not timestamp_in_bounds(saved.timestamp, wall_s):
             self.load_repair = f"saved timestamp {saved.timestamp} out of bounds: the wall clock replaces it"
             saved = SavedSigning(saved.key, wall_to_units(wall_s), saved.clean)
-        restart = SigningStore.restart_timestamp(saved) if saved else 0
+        floor = SigningStore.restart_floor(saved) if saved else 0
         key = config_key if config_key is not None else (saved.key if saved else None)
-        floor = max(0, restart - WINDOW_UNITS - 1) if saved else 0
-        self.signing = Signing(None if key == bytes(32) else key, max(wall_to_units(wall_s), restart), require, floor)
+        self.signing = Signing(None if key == bytes(32) else key, max(wall_to_units(wall_s), floor), require, floor)
         self._saved_timestamp = -1
         self._last_warning_s: dict[int, float] = {}
 

@@ -112,22 +112,41 @@ def test_store_keeps_key_and_timestamp_with_private_permissions(tmp_path):
     assert os.stat(tmp_path / "signing.key").st_mode & 0o777 == 0o600
 
 
-def test_restart_puts_every_frame_seen_before_it_outside_the_window(tmp_path):
+def test_restart_refuses_every_frame_seen_before_it(tmp_path):
     store = SigningStore(tmp_path / "signing.key")
     before = Signing(KEY, NOW)
     captured = signed_frame(timestamp=NOW + 1000)
     assert check(before, captured) is None
     store.save(before.key, before.timestamp, clean=True)
     after = SigningManager(None, False, store, WALL).signing
-    assert check(after, captured) == STALE
+    assert check(after, captured) == REPLAY
+    assert check(after, signed_frame(timestamp=NOW + 1001)) is None  # the same station, its next frame
 
 
-def test_unclean_stop_advances_further_than_the_save_interval(tmp_path):
+def test_unclean_stop_refuses_up_to_one_save_interval_past_the_saved_timestamp(tmp_path):
     store = SigningStore(tmp_path / "signing.key")
     store.save(KEY, NOW, clean=False)
     after = SigningManager(None, False, store, WALL).signing
     # a frame up to one save interval newer than the saved timestamp may have been accepted before
-    assert check(after, signed_frame(timestamp=NOW + 9 * UNITS_PER_S)) == STALE
+    assert check(after, signed_frame(timestamp=NOW + 9 * UNITS_PER_S)) == REPLAY
+    assert check(after, signed_frame(timestamp=NOW + 11 * UNITS_PER_S)) is None
+
+
+def test_restarts_in_quick_succession_never_lock_out_a_station_with_a_true_clock(tmp_path):
+    """Found by tests/stateful: each start set the local timestamp 60 s past the saved one, which the
+    next clean stop saved, so the second restart within a minute made a true clock `stale`."""
+    store = SigningStore(tmp_path / "signing.key")
+    store.save(KEY, NOW, clean=True)
+    wall = WALL
+    for restart in range(5):
+        wall += 2.0  # each start two seconds after the last
+        m = SigningManager(None, True, store, wall)
+        station = signed_frame(timestamp=wall_to_units(wall), link_id=restart)
+        assert m.signing.check(station, 76, 255, 190, False, wall) is None, f"refused after restart {restart}"
+        m.signing.next_timestamp(wall)  # a reply signed
+        m.save(clean=True)
+    after = SigningManager(None, True, store, wall).signing
+    assert after.check(station, 76, 255, 190, False, wall) == REPLAY  # the last run's frame, replayed
 
 
 def test_configured_key_wins_over_the_saved_one(tmp_path):
@@ -241,9 +260,9 @@ def test_a_saved_timestamp_beyond_the_bound_is_repaired_at_load(tmp_path):
         assert m.load_repair is not None
         assert m.signing.timestamp <= wall_to_units(WALL + 120)
         assert m.signing.check(signed_frame(timestamp=NOW + 70 * UNITS_PER_S), 76, 255, 190, False, WALL) is None
-    store.save(KEY, NOW, clean=True)  # positive control: a saved timestamp within bounds is kept
+    store.save(KEY, NOW + 100 * UNITS_PER_S, clean=True)  # positive control: within bounds, kept
     m = SigningManager(None, False, store, WALL)
-    assert m.load_repair is None and m.signing.timestamp > NOW + 60 * UNITS_PER_S
+    assert m.load_repair is None and m.signing.timestamp == NOW + 100 * UNITS_PER_S
 
 
 def test_a_frame_at_or_below_the_saved_timestamp_is_refused_after_a_restart_whatever_setup_follows(tmp_path):
