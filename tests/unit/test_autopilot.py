@@ -317,3 +317,60 @@ def test_fixed_mag_cal_yaw_saves_offsets_that_pass_the_compass_check(tmp_path):
     assert h.command(M.MAV_CMD_FIXED_MAG_CAL_YAW, 90) == ACCEPTED
     assert abs(h.node.params.get("COMPASS_OFS_X")) < 100
     assert h.arm() == ACCEPTED
+
+
+# --- jump loops (issue 17, item 6): bounded work per step, AP_Mission's jump limits -------------
+
+def test_a_jump_loop_over_an_instant_nav_item_completes_one_item_per_step_and_keeps_flying(tmp_path):
+    h = Harness(tmp_path)
+    plan(h, MissionItem(M.MAV_CMD_NAV_TAKEOFF, REL, z=10), MissionItem(M.MAV_CMD_NAV_DELAY, param1=0),
+         MissionItem(M.MAV_CMD_DO_JUMP, param1=2, param2=-1))
+    h.arm()
+    assert h.mode("AUTO") == ACCEPTED
+    assert h.run(60, until=lambda: 1 in reached(h))
+    mark = h.mark()
+    h.run(10.0)  # 200 steps of 50 ms
+    loops = [m.seq for m in h.of_type("MISSION_ITEM_REACHED", mark)]
+    assert 100 <= len(loops) <= 200 and set(loops) == {2}, "one completion per step, never a burst"
+    assert h.node.errors.snapshot() == {}
+    assert h.state.armed and abs(h.state.relative_alt_m - 10) < 1.0, "holding at the takeoff altitude"
+    assert h.node.mission.current_message().seq == 2
+
+
+def test_instant_nav_items_in_a_finite_loop_take_turns_as_current_then_the_mission_goes_on(tmp_path):
+    h = flying(tmp_path)
+    plan(h, MissionItem(M.MAV_CMD_NAV_DELAY, param1=0), MissionItem(M.MAV_CMD_NAV_DELAY, param1=0),
+         MissionItem(M.MAV_CMD_DO_JUMP, param1=1, param2=3), wp(h, 10, 0))
+    h.mode("AUTO")
+    mark = h.mark()
+    assert h.run(60, until=lambda: 4 in reached(h))
+    assert reached(h) == [1, 2] * 4 + [4]
+    assert [m.seq for m in h.of_type("MISSION_CURRENT", mark)][-1] == 4
+    assert h.node.errors.snapshot() == {}
+
+
+@pytest.mark.parametrize("loop", [
+    [MissionItem(M.MAV_CMD_DO_JUMP, param1=2, param2=-1)],  # a jump to itself, forever
+    [MissionItem(M.MAV_CMD_DO_JUMP, param1=3, param2=-1), MissionItem(M.MAV_CMD_DO_JUMP, param1=2, param2=-1)],
+    [MissionItem(M.MAV_CMD_DO_JUMP, param1=2, param2=100)],  # more than 64 jumps in one search
+])
+def test_a_jump_loop_with_no_nav_item_ends_the_mission_as_ardupilots_does(tmp_path, loop):
+    h = Harness(tmp_path)
+    plan(h, MissionItem(M.MAV_CMD_NAV_TAKEOFF, REL, z=10), *loop, wp(h, 10, 0))
+    h.arm()
+    h.mode("AUTO")
+    assert h.run(60, until=lambda: 1 in reached(h)), "the takeoff (the control: the mission ran)"
+    h.run(2.0)
+    assert reached(h) == [1], "the waypoint after the loop is never reached"
+    assert h.node.errors.snapshot() == {}
+    assert h.state.armed and abs(h.state.relative_alt_m - 10) < 1.0
+
+
+def test_a_finite_jump_within_the_limit_is_followed_to_the_end(tmp_path):
+    h = Harness(tmp_path)
+    plan(h, MissionItem(M.MAV_CMD_NAV_TAKEOFF, REL, z=10), MissionItem(M.MAV_CMD_DO_JUMP, param1=2, param2=60),
+         wp(h, 10, 0))
+    h.arm()
+    h.mode("AUTO")
+    assert h.run(60, until=lambda: 3 in reached(h))
+    assert reached(h) == [1, 3]

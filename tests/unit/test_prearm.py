@@ -10,6 +10,7 @@ from vehicle_harness import Harness
 
 from gcsd.mission import MissionItem
 from gcsd.sim.geo import offset
+from gcsd.vehicles.prearm import PrearmDisplay
 
 FAILED, ACCEPTED = M.MAV_RESULT_FAILED, M.MAV_RESULT_ACCEPTED
 
@@ -114,3 +115,12 @@ def test_a_mode_that_is_not_armable_refuses_arming(tmp_path):
 def test_a_companion_computer_has_nothing_to_arm(tmp_path):
     h = Harness(tmp_path, vehicle="companion")
     assert h.arm() == M.MAV_RESULT_UNSUPPORTED
+
+
+def test_the_prearm_display_asks_for_no_send_pass_while_armed():
+    display = PrearmDisplay()
+    assert display.poll(100.0, False, lambda: ["Check ANGLE_MAX"]) == ["PreArm: Check ANGLE_MAX"]
+    for now in (100.5, 101.0, 150.0):
+        assert display.poll(now, True, lambda: ["never asked"]) == []
+        assert display.next_deadline() > now, "a deadline in the past would make the send pass spin"
+    assert display.poll(151.0, False, lambda: ["Check ANGLE_MAX"]) == ["PreArm: Check ANGLE_MAX"], "disarmed again"

@@ -10,6 +10,12 @@ left of the queue is dropped, MISSION_ITEM_REACHED is sent (`pilot.reached(seq)`
 NAV item becomes current (`pilot.set_current(seq)`, which MISSION_CURRENT reports). A change of
 the store's current item from outside (MISSION_SET_CURRENT) restarts from that item.
 
+Work per step is bounded, as ArduPilot verifies one NAV command per update: a tick completes at
+most one NAV item and searches once for the next, which starts on the following tick (no
+recursion, however many items complete at once). The search follows at most MAX_JUMPS_PER_SEARCH
+DO_JUMPs (AP_Mission's 64), and a repeat-forever jump reached twice in one search (a loop with no
+NAV item in it, which can never end) stops it; either ends the mission as ArduPilot's does.
+
 NAV items: WAYPOINT and SPLINE_WAYPOINT (hold param1 s, acceptance radius param2), TAKEOFF,
 LAND, RETURN_TO_LAUNCH, LOITER_UNLIM, LOITER_TIME (param1 s) and LOITER_TURNS (param1 turns,
 at most 255), both with param3 the radius (at most 2550 m, as ArduPilot stores it; negative
@@ -34,6 +40,7 @@ ALT_TOLERANCE_M = 1.0
 ORBIT_LEAD_DEG = 25.0
 MAX_LOITER_RADIUS_M = 2550.0  # the largest radius ArduPilot's mission storage keeps (255 x 10 m)
 MAX_TURNS = 255  # LOITER_TURNS is stored in 8 bits
+MAX_JUMPS_PER_SEARCH = 64  # AP_Mission::get_next_cmd's max_loops
 
 
 def is_nav(command: int) -> bool:
@@ -97,24 +104,29 @@ class MissionRunner:
             self.pilot.reached(seq)
             if not self._advance(items, s):
                 return None
-            return self.tick(s, 0.0)
+            if sp is None:  # a NAV command with nothing to fly: stay put until the next starts
+                sp = Setpoint(Kind.IDLE if s.on_ground else Kind.HOLD, s.lat, s.lon, s.alt_amsl_m)
         return sp
 
     def _advance(self, items, s) -> bool:
-        """Find the next NAV item from the cursor, queueing DO/CONDITION items; False at the end."""
+        """Find the next NAV item from the cursor, queueing DO/CONDITION items; False at the end
+        (also when the search meets AP_Mission's jump limits)."""
         seq = self.cursor
-        hops = 0
-        before: list[tuple[int, MissionItem]] = []  # DO items met before the NAV item run with it
+        jumps_followed = 0
+        jumps_seen: set[int] = set()
+        before: dict[int, MissionItem] = {}  # DO items met before the NAV item run with it, once each
         while seq < len(items):
             item = items[seq]
-            hops += 1
-            if hops > 10 * len(items) + 10:
-                break  # a jump loop with no nav item
             if item.command == M.MAV_CMD_DO_JUMP:
                 target, repeats = int(item.param1), int(item.param2)
+                if jumps_followed >= MAX_JUMPS_PER_SEARCH or (repeats < 0 and seq in jumps_seen):
+                    before.clear()  # no NAV item within reach: the mission ends, as ArduPilot's does
+                    break
+                jumps_seen.add(seq)
                 done = self._jumps.get(seq, 0)
                 if 1 <= target < len(items) and (repeats < 0 or done < repeats):
                     self._jumps[seq] = done + 1
+                    jumps_followed += 1
                     seq = target
                     continue
                 seq += 1
@@ -124,16 +136,16 @@ class MissionRunner:
                 self._nav = {"started": False}
                 self._synced_seq = seq
                 self.pilot.set_current(seq)
-                self.queue = before
+                self.queue = list(before.items())
                 follow = seq + 1
                 while follow < len(items) and not is_nav(items[follow].command) \
                         and items[follow].command != M.MAV_CMD_DO_JUMP:
                     self.queue.append((follow, items[follow]))
                     follow += 1
                 return True
-            before.append((seq, item))
+            before.setdefault(seq, item)
             seq += 1
-        for _, item in before:
+        for item in before.values():
             if not M.MAV_CMD_CONDITION_DELAY <= item.command <= M.MAV_CMD_CONDITION_LAST:
                 self.pilot.do_command(item)
         self.complete = True

@@ -195,8 +195,9 @@ class PrearmDisplay:
         self.last_failures: list[str] = []
 
     def poll(self, now: float, armed: bool, failures) -> list[str]:
-        if armed:
+        if armed:  # nothing to do until disarmed: the next look is a check interval away
             self.last_failures = []
+            self.next_check_s = now + self.CHECK_INTERVAL_S
             return []
         if now < self.next_check_s:
             return []
