@@ -4,6 +4,7 @@ writes bytes to "GPS1" and reads its answer; REPLY packets, unmapped devices and
 from __future__ import annotations
 
 import os
+import time
 import tty
 
 from pymavlink.dialects.v20 import ardupilotmega as M
@@ -59,6 +60,38 @@ def test_serial_control_writes_to_the_device_and_replies_with_what_it_answers(da
         assert wait_for(gcs, lambda r: r.type == "SERIAL_CONTROL", 3.0, mark) is not None
         replies = gcs.since(mark, "SERIAL_CONTROL")
         assert [(r.msg.device, r.msg.count) for r in replies] == [(M.SERIAL_CONTROL_DEV_GPS1, 0)]
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_a_flood_of_waiting_requests_keeps_one_per_device_and_the_daemon_idle(daemon, client):
+    """43 000 requests with RESPOND and the longest timeout used to pile up and be walked with an
+    ioctl each, 100 times a second (issue 17, item 7)."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    os.set_blocking(master, False)
+    try:
+        d = daemon({"channels": [udp_channel("gcs")],
+                    "serial_control": [{"port": "gps1", "device": os.ttyname(slave), "baud": 9600}]})
+        gcs = client(udp_url(d.port("gcs")))
+        gcs.heartbeat()
+        flood = _request(M.SERIAL_CONTROL_DEV_GPS1, b"", timeout_ms=65535)
+        for _ in range(20):
+            for _ in range(500):
+                gcs.send(flood)
+            pump([gcs], 0.01)  # let the daemon read its socket
+        pump([gcs], 0.5)
+        cpu_before, wall_before = time.process_time(), time.monotonic()
+        pump([gcs], 2.0)
+        cpu_share = (time.process_time() - cpu_before) / (time.monotonic() - wall_before)
+        mark = gcs.mark()
+        gcs.send(_request(M.SERIAL_CONTROL_DEV_GPS1, b"", timeout_ms=300))  # the control: answered
+        os.write(master, b"$GPGGA\r\n")
+        reply = wait_for(gcs, lambda r: r.type == "SERIAL_CONTROL", 3.0, mark)
+        assert reply is not None and bytes(reply.msg.data[:reply.msg.count]) == b"$GPGGA\r\n"
+        assert len(gcs.since(mark, "SERIAL_CONTROL")) == 1, "the replaced requests are not answered"
+        assert cpu_share < 0.25, f"the test process (daemon and client) used {cpu_share:.0%} of a core"
     finally:
         os.close(master)
         os.close(slave)

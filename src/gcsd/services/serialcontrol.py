@@ -8,6 +8,13 @@ to 70 bytes, possibly none), with MULTI further replies while full 70-byte chunk
 Requests with REPLY set, the SHELL device and unmapped devices are ignored, as ArduPilot does.
 EXCLUSIVE is accepted and has nothing to lock (the devices are not gcsd's MAVLink channels).
 
+Bounded: at most one request waits per device, so at most one per configured device in total. A
+new request for a device replaces the one waiting there (unanswered; the bytes the device sent
+stay in its buffer for the new one), as ArduPilot's single passthrough port serves one request
+at a time: a ground station polls the console with a request after another, and only the latest
+is worth answering. So a send pass reads (and asks the port how much is waiting, one ioctl) at
+most once per configured device, however many requests came.
+
 `SerialPassthrough` is the pure part: requests in, replies out, the next deadline; the ports are
 objects with `read(n) -> bytes` (non-blocking), `write(data)` and `close()`, made by an injected
 `open_port(device, baud)` (pyserial by default). A port that fails is closed and logged; the next
@@ -46,7 +53,7 @@ class SerialPassthrough:
         self.open_port = open_port
         self.ports: dict[int, object] = {}
         self.bauds: dict[int, int] = {}
-        self.waiting: list[_Waiting] = []
+        self.waiting: dict[int, _Waiting] = {}  # by device: the one request waiting there
 
     def handle(self, msg, requester: tuple[int, int], channel, now: float) -> None:
         if msg.flags & M.SERIAL_CONTROL_FLAG_REPLY or msg.device not in self.config:
@@ -58,8 +65,8 @@ class SerialPassthrough:
         if data and not self._io(msg.device, lambda: port.write(data)):
             return
         if msg.flags & M.SERIAL_CONTROL_FLAG_RESPOND:
-            self.waiting.append(_Waiting(msg.device, requester, channel, now + msg.timeout / 1000.0,
-                                         bool(msg.flags & M.SERIAL_CONTROL_FLAG_MULTI)))
+            self.waiting[msg.device] = _Waiting(msg.device, requester, channel, now + msg.timeout / 1000.0,
+                                                bool(msg.flags & M.SERIAL_CONTROL_FLAG_MULTI))
 
     def _port(self, device: int, baud: int):
         cfg = self.config[device]
@@ -105,7 +112,7 @@ class SerialPassthrough:
     def replies(self, channel, now: float) -> list:
         """SERIAL_CONTROL replies due on `channel` now: a full chunk is waiting, or time is up."""
         out = []
-        for w in list(self.waiting):
+        for w in list(self.waiting.values()):
             if w.channel is not channel:
                 continue
             port = self.ports.get(w.device)
@@ -115,7 +122,7 @@ class SerialPassthrough:
             out.append(M.MAVLink_serial_control_message(w.device, M.SERIAL_CONTROL_FLAG_REPLY, 0, 0, len(data),
                                                         list(data.ljust(CHUNK, b"\0"))))
             if not (w.multi and len(data) == CHUNK):
-                self.waiting.remove(w)
+                del self.waiting[w.device]
         return out
 
     def next_deadline(self, now: float) -> float | None:
