@@ -37,6 +37,7 @@ from types import MappingProxyType
 import yaml
 from yaml.nodes import MappingNode, SequenceNode
 
+from .config_logs import read_flight_logs
 from .config_companion import (
     COMPANION_KEYS,
     read_bauds,
@@ -150,7 +151,7 @@ def _check_depth(text: str, filename: str) -> None:
 # --- the schema, one function per section -------------------------------------------------------
 
 _TOP_KEYS = ("vehicle", "state_dir", "params_file", "gcs", "mission", "ftp", "signing", "channels", "log",
-             "serial_control", "routing")
+             "serial_control", "routing", "flight_logs")
 _VEHICLE_KEYS = ("type", "sysid", "compid", "count", "home", "speedup")
 _MISSION_KEYS = ("max_items", "max_fence", "max_rally", "retry_ms")
 _CHANNEL_KEYS = ("name", "type", "address", "device", "baud", "mavlink", "streams", "options",
@@ -183,6 +184,7 @@ def _config(r: Reader, top: Section) -> Config:
                       tlog=r.path(log["tlog"], None, nullable=True)),
         serial_control=_serial_control(r, top["serial_control"], channels),
         routing=read_routing(r, top["routing"]),
+        flight_logs=read_flight_logs(r, top["flight_logs"], [c.name for c in channels]),
     )
 
 

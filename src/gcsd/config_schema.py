@@ -15,6 +15,7 @@ from pathlib import Path
 from types import MappingProxyType
 
 from .config_companion import ChannelFilter, RoutingConfig
+from .config_logs import FlightLogsConfig
 from .config_mqtt import MqttConfig
 from .streams import STREAM_NAMES
 
@@ -175,6 +176,7 @@ class Config:
     log: LogConfig = LogConfig()
     serial_control: tuple[SerialControlPort, ...] = ()
     routing: RoutingConfig = field(default_factory=RoutingConfig)
+    flight_logs: FlightLogsConfig = field(default_factory=FlightLogsConfig)
     source: Source = field(default=Source(), compare=False, repr=False)
 
 

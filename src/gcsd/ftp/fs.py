@@ -8,6 +8,10 @@ which was resolved once at start, and the result is resolved again with every sy
 be the root or lie under it, compared component by component (`Path.is_relative_to` on resolved
 paths, never a string prefix, so a root `/data` never admits `/data2`). Anything else raises
 FileNotFound, and nothing outside the root is opened, listed, stat'ed, renamed or removed.
+**Mounts** (`mounts={"logs": DIR}`): a first component naming a mount is served from that
+directory instead (the flight logs, kept beside the FTP root, appear as `logs/`); the same rules
+confine a mounted path to its directory (any of the roots), and a mount point itself is listed
+in the root, and cannot be removed or renamed.
 Operations on a directory entry itself (remove, rename) act on the entry inside its resolved
 parent, so a symlink is removed or renamed, never its target; the entry must still resolve
 inside the root. The root itself cannot be removed or renamed (Fail). Files are opened with
@@ -94,10 +98,16 @@ class RealFile:
 
 
 class ConfinedFs:
-    def __init__(self, root: str | os.PathLike, max_file_bytes: int) -> None:
+    def __init__(self, root: str | os.PathLike, max_file_bytes: int,
+                 mounts: dict[str, str | os.PathLike] | None = None) -> None:
         Path(root).mkdir(parents=True, exist_ok=True)
         self.root = Path(root).resolve(strict=True)
         self.max_file_bytes = max_file_bytes
+        self.mounts: dict[str, Path] = {}
+        for name, target in (mounts or {}).items():
+            Path(target).mkdir(parents=True, exist_ok=True)
+            self.mounts[name] = Path(target).resolve(strict=True)
+        self._roots = (self.root, *self.mounts.values())
 
     # --- confinement -----------------------------------------------------------------------
     def _lexical(self, raw: bytes) -> Path:
@@ -107,10 +117,12 @@ class ConfinedFs:
         parts = [p for p in text.split("/") if p not in ("", ".")]
         if ".." in parts:
             raise FtpError(Nak.FILE_NOT_FOUND)
+        if parts and parts[0] in self.mounts:
+            return self.mounts[parts[0]].joinpath(*parts[1:])
         return self.root.joinpath(*parts)
 
     def _inside(self, path: Path) -> bool:
-        return path == self.root or path.is_relative_to(self.root)
+        return any(path == root or path.is_relative_to(root) for root in self._roots)
 
     def resolve(self, raw: bytes) -> Path:
         """The fully resolved path (symlinks followed), which lies inside the root."""
@@ -126,7 +138,7 @@ class ConfinedFs:
         """The directory entry itself (not what a symlink points to): its parent resolved inside
         the root, the entry's own resolution inside the root too, and never the root."""
         lexical = self._lexical(raw)
-        if lexical == self.root:
+        if lexical in self._roots:
             raise FtpError(Nak.FAIL)
         self.resolve(raw)
         try:
@@ -194,6 +206,9 @@ class ConfinedFs:
                 out.append(DirEntry(item.name, True, 0))
             elif stat.S_ISREG(st.st_mode):
                 out.append(DirEntry(item.name, False, st.st_size))
+        if path == self.root and self.mounts:  # a mount hides a same-named entry of the root
+            out = sorted([e for e in out if e.name not in self.mounts]
+                         + [DirEntry(name, True, 0) for name in self.mounts], key=lambda e: e.name)
         return out
 
     def mkdir(self, raw: bytes) -> None:
