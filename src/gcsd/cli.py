@@ -1,5 +1,5 @@
 """The command line: ``gcsd [run] [-c FILE]``, ``gcsd -c FILE``, ``gcsd check-config FILE``,
-``gcsd status [-c FILE] [--json]``, ``gcsd --version``.
+``gcsd status [-c FILE] [--json]``, ``gcsd logs [-c FILE] [--json]``, ``gcsd --version``.
 
 `main` returns the exit code (the console script does ``sys.exit(main())``): 0 a clean stop or a
 good configuration, 2 a bad configuration or bad arguments, 1 any other failure. A bad
@@ -66,6 +66,9 @@ def _parser() -> argparse.ArgumentParser:
                              "started from another directory with the same file is found through its "
                              "registration)")
     status.add_argument("--json", action="store_true", help="print the raw JSON")
+    logs = commands.add_parser("logs", help="list the flight logs (DataFlash .BIN) a configuration keeps")
+    logs.add_argument("-c", "--config", metavar="FILE", help="configuration file (default: the built-in default)")
+    logs.add_argument("--json", action="store_true", help="print JSON")
     return parser
 
 
@@ -150,4 +153,19 @@ def _status(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-_COMMANDS = {"run": _run, "check-config": _check_config, "status": _status}
+def _logs(args: argparse.Namespace) -> int:
+    import json
+
+    from gcsd.logs.listing import format_logs, list_logs
+
+    try:
+        config = default_config() if args.config is None else load_config(args.config)
+    except ConfigError as exc:
+        _print_problems(exc)
+        return EXIT_BAD_CONFIG
+    logs = list_logs(config)
+    print(json.dumps(logs, indent=2) if args.json else format_logs(logs, config))
+    return EXIT_OK
+
+
+_COMMANDS = {"run": _run, "check-config": _check_config, "status": _status, "logs": _logs}

@@ -125,7 +125,8 @@ class Capture:
 
     # --- inputs ----------------------------------------------------------------------------
     def handle_heartbeat(self, channel: int, sysid: int, compid: int, autopilot: int, now: float) -> list:
-        if autopilot != MAV_AUTOPILOT_ARDUPILOTMEGA or sysid == self.sysid or not self._listens(channel):
+        if autopilot != MAV_AUTOPILOT_ARDUPILOTMEGA or (sysid, compid) == (self.sysid, self.compid) \
+                or not self._listens(channel):
             return []
         s = self._session(sysid, channel)
         if s is None:

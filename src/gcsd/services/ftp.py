@@ -11,7 +11,8 @@
   radio link keeps room for telemetry and for the client's requests.
 - Any FTP reply slows the link's streams x4 for SLOW_S (1 s), as ArduPilot does.
 - The FTP root is `ftp.root` under the vehicle's state directory; writes stop at
-  `ftp.max_file_bytes`. Virtual files: `@PARAM/param.pck` through the node's parameter store
+  `ftp.max_file_bytes`. `mounts` adds directories kept elsewhere (the flight logs as `logs/`).
+  Virtual files: `@PARAM/param.pck` through the node's parameter store
   and parameter service, `@MISSION/*.dat` through its mission service.
 """
 
@@ -63,12 +64,12 @@ class NodeParams:
 class FtpService(Service):
     capabilities = M.MAV_PROTOCOL_CAPABILITY_FTP
 
-    def __init__(self, node, root: Path, max_file_bytes: int) -> None:
+    def __init__(self, node, root: Path, max_file_bytes: int, mounts: dict[str, Path] | None = None) -> None:
         self.node = node
         params = NodeParams(node) if getattr(node, "params", None) is not None else None
         plans = getattr(node, "mission", None)  # the mission service: read_plan / write_plan
         missions = MissionFiles(plans) if hasattr(plans, "read_plan") else None
-        self.server = FtpServer(ConfinedFs(root, max_file_bytes), VirtualFiles(params, missions))
+        self.server = FtpServer(ConfinedFs(root, max_file_bytes, mounts), VirtualFiles(params, missions))
         self._outbox: dict[int, deque[Outgoing]] = {}
         self._slow_until_s: dict[int, float] = {}
         self._next_burst_s: dict[int, float] = {}
