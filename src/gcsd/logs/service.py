@@ -18,8 +18,9 @@
   controller's channel at once, its writes go to the store. A block that cannot be written
   (min_free_mb reached and nothing left to rotate) is counted in `write_refused` and still ACKed.
 
-Counters (`counters()`, shown by `gcsd status`): logs listed, bytes served, capture blocks,
-duplicates, recovered, abandoned, ignored, write_refused.
+Counters (`counters()`, shown by `gcsd status` as `logs_*`): lists answered, bytes served, logs
+erased, requests refused while armed, writes refused; with capture, `logs_capture_*`: blocks,
+duplicates, recovered, abandoned, ignored, logs, starts and NACKs sent.
 """
 
 from __future__ import annotations
@@ -304,7 +305,7 @@ class FlightLogService(Service):
         self._sim_file = None
 
     def counters(self) -> dict[str, int]:
-        out = dict(vars(self.counters_))
+        out = {f"logs_{k}": v for k, v in vars(self.counters_).items()}
         if self.capture is not None:
-            out.update({f"capture_{k}": v for k, v in vars(self.capture.stats).items()})
+            out.update({f"logs_capture_{k}": v for k, v in vars(self.capture.stats).items()})
         return out
