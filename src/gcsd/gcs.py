@@ -3,9 +3,10 @@ components (one VehicleNode per simulated vehicle) and handles no message itself
 
 Receive path for every good frame on a channel: the channel has it verified first (the signing
 check, `_verify`; a frame that fails changes nothing but the reject counters, see channel.py),
-then here: mark the channel active (anything but RADIO_STATUS), ask the router (learn, forward,
-process locally?), write the raw frame to the chosen channels, then hand the decoded message to
-the local component(s) it is for. Frames with a bad CRC are dropped and counted, or, on a
+then here: drop it if it is a frame this daemon forwarded less than LOOP_WINDOW_S ago (a
+forwarding loop, counted `loop_dropped`; dedup.py), mark the channel active (anything but
+RADIO_STATUS), ask the router (learn, forward, process locally?), write the raw frame to the
+chosen channels (remembering it), then hand the decoded message to the local component(s) it is for. Frames with a bad CRC are dropped and counted, or, on a
 `forward_bad_crc` channel, forwarded unchanged as broadcasts and never processed.
 
 Tasks (one TaskGroup): one per channel (receive in callbacks, send passes), the simulation (every
@@ -36,6 +37,7 @@ from .clock import Clock
 from .codec import Frame
 from .config import Config
 from .config_mqtt import route_capacity
+from .dedup import LOOP_WINDOW_S, RecentFrames
 from .msgids import HEARTBEAT as MSG_ID_HEARTBEAT
 from .msgids import is_radio
 from .node import VehicleNode
@@ -99,6 +101,7 @@ class GCS:
         self._by_sysid = {n.sysid: n for n in self.nodes}
         self.router = Router({(n.sysid, n.compid) for n in self.nodes}, [ch.policy for ch in self.channels],
                              RouteTable(route_capacity((c.type for c in config.channels), MAX_ROUTES)))
+        self.loops = RecentFrames(LOOP_WINDOW_S)  # frames forwarded lately: one coming back is a loop
         self.bad_crc_forwarded = 0
         for ch in self.channels:
             ch.verify = functools.partial(self._verify, ch)
@@ -130,6 +133,9 @@ class GCS:
     def on_frame(self, channel: Channel, frame: Frame, now: float) -> None:
         """Route one accepted frame and hand it to the local components it is for (inside the
         channel's receive boundary)."""
+        if self.loops.seen(frame.raw, now):  # a frame we forwarded, back again: a loop (dedup.py)
+            channel.stats.loop_dropped += 1
+            return
         msgid = frame.msgid
         if channel.index not in self.active and not is_radio(msgid):
             self.active.add(channel.index)
@@ -142,6 +148,7 @@ class GCS:
             raw = frame.raw
             if channel.sign_forwarded and self.signing.key is not None:
                 raw = self._signed(channel, raw)
+            self.loops.remember(raw, now)  # the bytes that go out: what a loop brings back
             channels = self.channels
             for index in decision.out_channels:
                 channels[index].write(raw)
@@ -200,6 +207,11 @@ class GCS:
             node.link(channel).push(MSG_ID_HEARTBEAT)
 
     def on_bad_crc(self, channel: Channel, raw: bytes) -> None:
+        now = self.clock.now()
+        if self.loops.seen(raw, now):
+            channel.stats.loop_dropped += 1
+            return
+        self.loops.remember(raw, now)
         for index in self.router.broadcast_channels(channel.index):
             self.channels[index].write(raw)
         self.bad_crc_forwarded += 1
