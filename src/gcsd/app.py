@@ -7,6 +7,8 @@ params_file, tlog) or a ConfigError while the vehicles are built (a bad params_f
 problem is one ``FILE:LINE: key.path: what`` line on stderr, as check-config prints them.
 Once it is ready (every server channel bound, every client channel tried once) the daemon registers its control socket (control.register) so that
 `gcsd status` finds it from any directory; the registration is removed at the stop.
+SIGHUP (`systemctl reload gcsd`) re-reads the configuration file and applies its channels
+(livechannels.py); a bad file is logged, line by line, and changes nothing.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import sys
 import structlog
 
 from . import control, preflight
-from .config import Config, ConfigError
+from .config import Config, ConfigError, load_config
 from .gcs import GCS
 from .notify import Notifier
 from .transport import ChannelStartError
@@ -42,11 +44,14 @@ async def run_daemon(config: Config) -> int:
 
     for signum in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(signum, on_signal, signum)
+    gcs_ref: list[GCS] = []
+    loop.add_signal_handler(signal.SIGHUP, lambda: gcs_ref and _reload(gcs_ref[0], loop))
     try:
         problems = preflight.prepare(config)
         if problems:
             raise ConfigError(problems)
         gcs = GCS(config)
+        gcs_ref.append(gcs)
         log.info(
             "daemon_started", vehicle=config.vehicle.type, sysid=config.vehicle.sysid,
             compid=config.vehicle.compid, count=config.vehicle.count, channels=len(gcs.channels),
@@ -64,10 +69,38 @@ async def run_daemon(config: Config) -> int:
         log.exception("daemon_failed")
         return 1
     finally:
-        for signum in (signal.SIGINT, signal.SIGTERM):
+        for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             loop.remove_signal_handler(signum)
     log.info("daemon_stopped")
     return 0
+
+
+def _reload(gcs: GCS, loop: asyncio.AbstractEventLoop) -> None:
+    """SIGHUP: re-read the configuration file and apply its channels (livechannels.py); a bad
+    file is logged, line by line, and changes nothing."""
+    path = gcs.config.source.file
+    if path is None:
+        log.warning("reload_ignored", reason="running the built-in default configuration: no file to re-read")
+        return
+    try:
+        config = load_config(path)
+    except ConfigError as exc:
+        for problem in exc.problems:
+            log.error("reload_refused", problem=problem)
+        return
+    log.info("reload_requested", config=path)
+    task = loop.create_task(gcs.live.reload(config))
+    _reloads.add(task)
+    task.add_done_callback(_reloaded)
+
+
+_reloads: set[asyncio.Task] = set()
+
+
+def _reloaded(task: asyncio.Task) -> None:
+    _reloads.discard(task)
+    if not task.cancelled() and task.exception() is not None:
+        log.error("reload_failed", error=repr(task.exception()))
 
 
 async def _run_with_notify(gcs: GCS, stop: asyncio.Event, notifier: Notifier) -> None:

@@ -179,6 +179,7 @@ class Channel:
         self.output_enabled = "high_latency" not in config.options
         # companion routing (filters.py): None when the channel has no filter / no rate cap
         self.in_gate, self.out_gate = gates(config)
+        self.retired = False  # removed at run time: its slot waits for the next added channel (livechannels.py)
         self.stream_requests = StreamRequests(config.request_streams) if config.request_streams else None
 
     # --- peers -----------------------------------------------------------------------------
@@ -242,6 +243,10 @@ class Channel:
             peer = self._waiting.pop(key, None)
         if peer is not None:
             self._retire(peer.parser.stats)
+
+    def drop_all_peers(self) -> None:
+        for key in [*self.peers, *self._waiting]:
+            self.remove_peer(key)
 
     def _retire(self, s: ParseStats) -> None:
         r = self._retired

@@ -1,5 +1,6 @@
 """The command line: ``gcsd [run] [-c FILE]``, ``gcsd -c FILE``, ``gcsd check-config FILE``,
-``gcsd status [-c FILE] [--json]``, ``gcsd logs [-c FILE] [--json]``, ``gcsd --version``.
+``gcsd status [-c FILE] [--json]``, ``gcsd logs [-c FILE] [--json]``,
+``gcsd channel list|add|remove [-c FILE]`` (cli_channel.py), ``gcsd --version``.
 
 `main` returns the exit code (the console script does ``sys.exit(main())``): 0 a clean stop or a
 good configuration, 2 a bad configuration or bad arguments, 1 any other failure. A bad
@@ -23,7 +24,7 @@ import sys
 
 import structlog
 
-from gcsd import __version__
+from gcsd import __version__, cli_channel
 from gcsd.config import ConfigError, default_config, load_config
 from gcsd.log import setup_logging
 
@@ -69,6 +70,7 @@ def _parser() -> argparse.ArgumentParser:
     logs = commands.add_parser("logs", help="list the flight logs (DataFlash .BIN) a configuration keeps")
     logs.add_argument("-c", "--config", metavar="FILE", help="configuration file (default: the built-in default)")
     logs.add_argument("--json", action="store_true", help="print JSON")
+    cli_channel.add_parser(commands)
     return parser
 
 
@@ -168,4 +170,8 @@ def _logs(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-_COMMANDS = {"run": _run, "check-config": _check_config, "status": _status, "logs": _logs}
+def _channel(args: argparse.Namespace) -> int:
+    return cli_channel.run(args)
+
+
+_COMMANDS = {"run": _run, "check-config": _check_config, "status": _status, "logs": _logs, "channel": _channel}

@@ -1,11 +1,16 @@
 """The local control socket (`gcsd.sock` in state_dir, mode 0600), its registration, and the
 tables `gcsd status` prints.
 
-The daemon answers each connection with one JSON document: channels (type, address, peers,
-counters, packet rates over the last statistics interval, signing rejects by reason), learned
-routes, the vehicles, the per-component error counts (`errors`) and the counted events outside
-the channels (`counters`: routing's drops, each service's, summed over a swarm). Read-only: nothing can be
-changed through this socket.
+Each connection carries one request, a JSON line, and gets one JSON document back:
+- `{"cmd": "status"}` (or nothing: the connection is half-closed or silent for REQUEST_WAIT_S):
+  channels (type, address, peers, counters, packet rates over the last statistics interval,
+  signing rejects by reason), learned routes, the vehicles, the per-component error counts
+  (`errors`) and the counted events outside the channels (`counters`: routing's drops, each
+  service's, summed over a swarm).
+- `{"cmd": "channel_add", "spec": {...}}` and `{"cmd": "channel_remove", "name": ...}`
+  (`gcsd channel add|remove`, livechannels.py): `{"ok": true}` or `{"ok": false, "error": ...}`.
+The socket is the daemon's user's alone (0600 in state_dir): whoever can open it may change the
+channels, as whoever can send the daemon SIGHUP may reload them.
 
 Finding a daemon (the rule `gcsd status` follows; relative paths in a configuration are relative
 to the daemon's working directory, so the socket's path depends on where it was started):
@@ -39,15 +44,28 @@ from pathlib import Path
 from .atomic import write_atomic
 
 SOCKET_NAME = "gcsd.sock"
+REQUEST_WAIT_S = 2.0
 _MAV_TYPE_PREFIX = "MAV_TYPE_"
 
 
-async def serve(path: Path, snapshot) -> asyncio.AbstractServer:
+async def serve(path: Path, snapshot, commands: dict | None = None) -> asyncio.AbstractServer:
+    """`snapshot()` answers status; `commands[name](request)` (a coroutine returning None or an
+    error line) answers the others."""
     path.unlink(missing_ok=True)
+    commands = commands or {}
 
     async def answer(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         try:
-            writer.write(json.dumps(snapshot(), default=str).encode() + b"\n")
+            request = await _request(reader)
+            handler = commands.get(request.get("cmd"))
+            if request.get("cmd", "status") == "status":
+                reply = snapshot()
+            elif handler is None:
+                reply = {"ok": False, "error": f"unknown request {request.get('cmd')!r}"}
+            else:
+                error = await handler(request)
+                reply = {"ok": error is None, "error": error}
+            writer.write(json.dumps(reply, default=str).encode() + b"\n")
             await writer.drain()
         finally:
             writer.close()
@@ -57,20 +75,38 @@ async def serve(path: Path, snapshot) -> asyncio.AbstractServer:
     return server
 
 
+async def _request(reader: asyncio.StreamReader) -> dict:
+    try:
+        line = await asyncio.wait_for(reader.readline(), REQUEST_WAIT_S)
+    except (TimeoutError, ValueError):  # ValueError: a line over the stream's limit
+        return {}
+    try:
+        request = json.loads(line) if line.strip() else {}
+    except ValueError:
+        return {"cmd": "invalid"}
+    return request if isinstance(request, dict) else {"cmd": "invalid"}
+
+
 def query(path: Path, timeout_s: float = 3.0) -> dict:
+    document = request(path, {"cmd": "status"}, timeout_s)
+    if not isinstance(document, dict) or not isinstance(document.get("channels"), list):
+        raise ValueError("the answer is not a gcsd status document")
+    return document
+
+
+def request(path: Path, message: dict, timeout_s: float = 15.0):
+    """One request to a daemon's control socket; its JSON answer."""
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
         sock.settimeout(timeout_s)
         sock.connect(str(path))
+        sock.sendall(json.dumps(message).encode() + b"\n")
         chunks = []
         while True:
             data = sock.recv(65536)
             if not data:
                 break
             chunks.append(data)
-    document = json.loads(b"".join(chunks))
-    if not isinstance(document, dict) or not isinstance(document.get("channels"), list):
-        raise ValueError("the answer is not a gcsd status document")
-    return document
+    return json.loads(b"".join(chunks))
 
 
 # --- registration: how `gcsd status` finds a daemon started elsewhere -------------------------

@@ -35,7 +35,8 @@ from .boundary import ErrorCounts
 from .channel import Channel, Peer
 from .clock import Clock
 from .codec import Frame
-from .config import Config
+from .config import MAX_CHANNELS, Config
+from .config_schema import ChannelConfig
 from .config_mqtt import route_capacity
 from .dedup import LOOP_WINDOW_S, RecentFrames
 from .msgids import HEARTBEAT as MSG_ID_HEARTBEAT
@@ -47,7 +48,8 @@ from .services.signing import SigningService
 from .signgate import signed_copy
 from .signing import SAVE_INTERVAL_S, SigningManager, SigningStore
 from .tlog import TlogWriter
-from .transport import ChannelStartError, run_channel
+from .livechannels import LiveChannels, load_specs
+from .transport import ChannelStartError
 from .vehicles import vehicle_type
 
 log = structlog.get_logger("gcsd.gcs")
@@ -63,7 +65,8 @@ class GCS:
         self.clock = clock or Clock()
         self.errors = ErrorCounts()
         now = self.clock.now
-        self.channels = [Channel(i, c, now) for i, c in enumerate(config.channels)]
+        restored = load_specs(Path(config.state_dir), config.channels)  # channels added at run time
+        self.channels = [Channel(i, c, now) for i, c in enumerate([*config.channels, *(c for _, c in restored)])]
         self._wakeups = [asyncio.Event() for _ in self.channels]
         self.active: set[int] = set()
         self.opened: set[int] = set()  # channels open at least once
@@ -88,14 +91,9 @@ class GCS:
         if self.signing_manager.load_repair:
             log.warning("signing_timestamp_repaired", reason=self.signing_manager.load_repair)
         self.signing = self.signing_manager.signing
-        for ch in self.channels:
-            ch.signing = self.signing
-            ch.wall = self.clock.wall
         for node in self.nodes:
             node.add_service(SigningService(node, self.signing_manager))
         self.tlog = TlogWriter(config.log.tlog) if config.log.tlog else None
-        for ch in self.channels:
-            ch.tlog = self.tlog
         self.started_s = self.clock.now()
         self._rates: dict[str, tuple[float, float]] = {}
         self._by_sysid = {n.sysid: n for n in self.nodes}
@@ -104,15 +102,58 @@ class GCS:
         self.loops = RecentFrames(LOOP_WINDOW_S)  # frames forwarded lately: one coming back is a loop
         self.bad_crc_forwarded = 0
         for ch in self.channels:
-            ch.verify = functools.partial(self._verify, ch)
-            ch.on_frame = self.on_frame
-            ch.errors = self.errors
-            ch.on_reject = self._reject
-            ch.on_bad_crc = self.on_bad_crc
-            ch.on_peer_joined = self.on_peer_joined
-            # a tcp-server connection is served before its first good frame unless signatures are
-            # required there (TCP cannot be spoofed: no amplification; see channel.py)
-            ch.serve_on_connect = not (config.signing.require and not ch.unsigned_ok)
+            self._wire(ch)
+        self.live = LiveChannels(self, restored)
+
+    def _wire(self, ch: Channel) -> None:
+        """Connect a channel to the daemon's receive path, signing, tlog and error boundary."""
+        ch.signing = self.signing
+        ch.wall = self.clock.wall
+        ch.tlog = self.tlog
+        ch.verify = functools.partial(self._verify, ch)
+        ch.on_frame = self.on_frame
+        ch.errors = self.errors
+        ch.on_reject = self._reject
+        ch.on_bad_crc = self.on_bad_crc
+        ch.on_peer_joined = self.on_peer_joined
+        # a tcp-server connection is served before its first good frame unless signatures are
+        # required there (TCP cannot be spoofed: no amplification; see channel.py)
+        ch.serve_on_connect = not (self.config.signing.require and not ch.unsigned_ok)
+
+    # --- channels at run time (livechannels.py) ------------------------------------------------
+    def free_slot(self, prefer: int | None = None) -> int | None:
+        """The slot for a channel added at run time: `prefer` or the lowest retired one, or a new one."""
+        retired = [ch.index for ch in self.channels if ch.retired]
+        if prefer in retired:
+            return prefer
+        if retired:
+            return retired[0]
+        return len(self.channels) if len(self.channels) < MAX_CHANNELS else None
+
+    def attach(self, index: int, config: ChannelConfig) -> Channel:
+        """A new channel in slot `index`: wired, known to the router and to every vehicle."""
+        ch = Channel(index, config, self.clock.now)
+        self._wire(ch)
+        if index == len(self.channels):
+            self.channels.append(ch)
+            self._wakeups.append(asyncio.Event())
+            self._node_due.append([0.0] * len(self.nodes))
+        else:
+            self.channels[index] = ch
+            self._wakeups[index] = asyncio.Event()
+            self._node_due[index] = [0.0] * len(self.nodes)
+        self.router.set_policy(index, ch.policy)
+        now = self.clock.now()
+        for node in self.nodes:
+            node.attach_link(ch, now)
+        return ch
+
+    def detach(self, ch: Channel) -> None:
+        """A channel closed at run time: no peers, no routes; its slot waits for the next one."""
+        ch.drop_all_peers()
+        ch.retired = True
+        self.router.table.forget_channel(ch.index)
+        self.active.discard(ch.index)
 
     def wake(self, channel: Channel) -> None:
         self._wakeups[channel.index].set()
@@ -246,7 +287,10 @@ class GCS:
         """Serve every channel until `stop` is set."""
         sock_path = Path(self.config.state_dir) / control.SOCKET_NAME
         try:
-            server = await control.serve(sock_path, self.status)
+            server = await control.serve(sock_path, self.status, {
+                "channel_add": lambda request: self.live.add(request.get("spec")),
+                "channel_remove": lambda request: self.live.remove(str(request.get("name"))),
+            })
         except OSError as exc:
             server = None
             log.error("control_socket_failed", path=str(sock_path), error=str(exc))
@@ -281,12 +325,8 @@ class GCS:
 
     async def _serve_tasks(self, stop: asyncio.Event) -> None:
         async with asyncio.TaskGroup() as tg:
-            tasks = [
-                tg.create_task(run_channel(ch, self.send_pass, self._wakeups[ch.index], self._opened,
-                                           self.errors.failed), name=ch.name)
-                for ch in self.channels
-            ]
-            tasks.append(tg.create_task(self._simulate(), name="simulation"))
+            self.live.start(tg)
+            tasks = [tg.create_task(self._simulate(), name="simulation")]
             tasks.append(tg.create_task(self._log_stats(), name="stats"))
             tasks.append(tg.create_task(self._save_signing_timestamp(), name="signing"))
             await stop.wait()
@@ -294,7 +334,7 @@ class GCS:
             for node in self.nodes:
                 node.shutdown(now)  # final answers go out while the links are still open
             await asyncio.sleep(0.05)  # let stream transports write them
-            for task in tasks:
+            for task in [*tasks, *self.live.tasks.values()]:
                 task.cancel()
 
     async def _simulate(self) -> None:
@@ -317,7 +357,7 @@ class GCS:
                     log.error("signing_save_failed", error=str(exc))
 
     async def _log_stats(self) -> None:
-        last = {ch.name: ch.snapshot() for ch in self.channels}
+        last = {ch: ch.snapshot() for ch in self.channels}
         while True:
             for _ in range(int(STATS_INTERVAL_S)):
                 await asyncio.sleep(1.0)
@@ -327,27 +367,27 @@ class GCS:
             with self.errors.guard("stats", self.clock.now()):
                 self._stats_pass(last)
 
-    def _stats_pass(self, last: dict[str, dict[str, int]]) -> None:
+    def _stats_pass(self, last: dict[Channel, dict[str, int]]) -> None:
         """The 10-second stats line and the packet rates `gcsd status` shows."""
-        for ch in self.channels:
+        for ch in self.live.running():
             snap = ch.snapshot()
-            prev = last[ch.name]
+            prev = last.get(ch, snap)
             self._rates[ch.name] = (
                 (snap["packets_in"] - prev["packets_in"]) / STATS_INTERVAL_S,
                 (snap["packets_out"] - prev["packets_out"]) / STATS_INTERVAL_S,
             )
-            last[ch.name] = snap
+            last[ch] = snap
             log.info("channel_stats", channel=ch.name, **snap)
         log.info("routes_learned", routes=len(self.router.table), not_learned=self.router.table.not_learned)
 
     def stats(self) -> dict[str, dict[str, int]]:
-        return {ch.name: ch.snapshot() for ch in self.channels}
+        return {ch.name: ch.snapshot() for ch in self.live.running()}
 
     def status(self) -> dict:
         """Everything `gcsd status` shows (see control.py)."""
         now = self.clock.now()
         channels = []
-        for ch in self.channels:
+        for ch in self.live.running():
             snap = ch.snapshot()
             rate_in, rate_out = self._rates.get(ch.name, (0.0, 0.0))
             address = f"{ch.local_address[0]}:{ch.local_address[1]}" if ch.local_address else (

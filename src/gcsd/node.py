@@ -129,7 +129,8 @@ class VehicleNode:
                     link.set_stream_rate(stream, link.channel.config.streams[stream], now)
                     continue
                 link.set_stream_rate(stream, params.get(name), now)
-                params.on_change(name, lambda _n, v, link=link, stream=stream: link.set_stream_rate(stream, v, self.clock.now()))
+                params.on_change(name, lambda _n, v, i=link.channel.index, stream=stream:
+                                 self.links[i].set_stream_rate(stream, v, self.clock.now()))
         self.gcs_sysid = int(params.get("SYSID_MYGCS")) if "SYSID_MYGCS" in params else self.gcs_sysid_config
         self.enforce_gcs_sysid = bool(params.get("SYSID_ENFORCE")) if "SYSID_ENFORCE" in params else self.enforce_config
         params.on_change("SYSID_MYGCS", lambda _n, v: setattr(self, "gcs_sysid", int(v)))
@@ -180,6 +181,19 @@ class VehicleNode:
 
     def _producible(self, msgid: int) -> bool:
         return msgid in PRODUCERS and self.vehicle.produces(msgid)
+
+    def attach_link(self, channel: Channel, now: float) -> None:
+        """A channel opened at run time (livechannels.py): a link in its slot, at its SRn_ rates
+        when the slot has them, else at its configured rates."""
+        link = Link(channel, now, self._producible, lambda ch=channel: self._wake(ch))
+        for stream in STREAM_NAMES:
+            name = f"SR{channel.index}_{PARAM_SUFFIX[stream]}"
+            if name in self.params:
+                link.set_stream_rate(stream, self.params.get(name), now)
+        if channel.index == len(self.links):
+            self.links.append(link)
+        else:
+            self.links[channel.index] = link
 
     def link(self, channel: Channel) -> Link:
         return self.links[channel.index]

@@ -108,6 +108,11 @@ class RouteTable:
         del self._routes[(oldest.sysid, oldest.compid, oldest.channel)]
         return True
 
+    def forget_channel(self, channel: int) -> None:
+        """Every route through a channel that was closed at run time."""
+        for key in [k for k in self._routes if k[2] == channel]:
+            del self._routes[key]
+
     def has(self, sysid: int, compid: int, channel: int) -> bool:
         return (sysid, compid, channel) in self._routes
 
@@ -124,11 +129,23 @@ class Router:
         self.policies = list(policies)
         self.table = table if table is not None else RouteTable()
         self.unknown_dropped = 0  # unknown-id frames from sources never seen with a good frame
-        # channel -> every channel of its group, itself included (only channels in a group)
         self.members: dict[int, tuple[int, ...]] = {}
-        for ch, policy in enumerate(self.policies):
-            if policy.group is not None:
-                self.members[ch] = tuple(i for i, p in enumerate(self.policies) if p.group == policy.group)
+        self._group_members()
+
+    def _group_members(self) -> None:
+        """channel -> every channel of its group, itself included (only channels in a group)."""
+        self.members = {
+            ch: tuple(i for i, p in enumerate(self.policies) if p.group == policy.group)
+            for ch, policy in enumerate(self.policies) if policy.group is not None
+        }
+
+    def set_policy(self, channel: int, policy: ChannelPolicy) -> None:
+        """A channel opened at run time (livechannels.py), in a new slot or a retired one."""
+        if channel == len(self.policies):
+            self.policies.append(policy)
+        else:
+            self.policies[channel] = policy
+        self._group_members()
 
     def decide(
         self,
