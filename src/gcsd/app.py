@@ -5,6 +5,9 @@ stopping exits at once. Returns the process exit code: 0 clean stop, 1 failure, 
 configuration found before anything started: preflight.prepare (state_dir, FTP roots,
 params_file, tlog) or a ConfigError while the vehicles are built (a bad params_file line); each
 problem is one ``FILE:LINE: key.path: what`` line on stderr, as check-config prints them.
+Before anything reads or writes state, the daemon locks state_dir (statelock.py): a second
+daemon on the same state_dir exits 1 with one line naming the pid that holds it, having
+changed nothing (no socket rebound, no mav.parm rewritten).
 Once it is ready (every server channel bound, every client channel tried once) the daemon registers its control socket (control.register) so that
 `gcsd status` finds it from any directory; the registration is removed at the stop.
 SIGHUP (`systemctl reload gcsd`) re-reads the configuration file and applies its channels
@@ -16,10 +19,11 @@ from __future__ import annotations
 import asyncio
 import signal
 import sys
+from pathlib import Path
 
 import structlog
 
-from . import control, preflight
+from . import control, preflight, statelock
 from .config import Config, ConfigError, load_config
 from .gcs import GCS
 from .notify import Notifier
@@ -46,10 +50,12 @@ async def run_daemon(config: Config) -> int:
         loop.add_signal_handler(signum, on_signal, signum)
     gcs_ref: list[GCS] = []
     loop.add_signal_handler(signal.SIGHUP, lambda: gcs_ref and _reload(gcs_ref[0], loop))
+    lock = None
     try:
         problems = preflight.prepare(config)
         if problems:
             raise ConfigError(problems)
+        lock = statelock.acquire(Path(config.state_dir))  # before anything reads or writes state
         gcs = GCS(config)
         gcs_ref.append(gcs)
         log.info(
@@ -62,8 +68,9 @@ async def run_daemon(config: Config) -> int:
         for problem in exc.problems:
             print(problem, file=sys.stderr)
         return 2
-    except ChannelStartError as exc:  # a taken port: one clear line, no traceback
+    except (ChannelStartError, statelock.StateDirBusy) as exc:  # one clear line, no traceback
         log.error("daemon_failed", error=str(exc))
+        print(f"gcsd: {exc}", file=sys.stderr)
         return 1
     except Exception:
         log.exception("daemon_failed")
@@ -71,6 +78,8 @@ async def run_daemon(config: Config) -> int:
     finally:
         for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             loop.remove_signal_handler(signum)
+        if lock is not None:
+            lock.release()
     log.info("daemon_stopped")
     return 0
 

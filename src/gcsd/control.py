@@ -33,6 +33,7 @@ use `gcsd status -c /etc/gcsd/gcsd.yaml`, whose state_dir is absolute (systemd/R
 from __future__ import annotations
 
 import asyncio
+import errno
 import json
 import os
 import socket
@@ -51,7 +52,9 @@ _MAV_TYPE_PREFIX = "MAV_TYPE_"
 async def serve(path: Path, snapshot, commands: dict | None = None) -> asyncio.AbstractServer:
     """`snapshot()` answers status; `commands[name](request)` (a coroutine returning None or an
     error line) answers the others."""
-    path.unlink(missing_ok=True)
+    if _answers(path):  # another daemon's: never taken over (its `gcsd status` would go dark)
+        raise OSError(errno.EADDRINUSE, f"another daemon answers on {path}")
+    path.unlink(missing_ok=True)  # left behind by a daemon that was killed
     commands = commands or {}
 
     async def answer(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
@@ -85,6 +88,16 @@ async def _request(reader: asyncio.StreamReader) -> dict:
     except ValueError:
         return {"cmd": "invalid"}
     return request if isinstance(request, dict) else {"cmd": "invalid"}
+
+
+def _answers(path: Path) -> bool:
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
+        sock.settimeout(1.0)
+        try:
+            sock.connect(str(path))
+        except OSError:  # absent, refused (nobody listening), not a socket
+            return False
+    return True
 
 
 def query(path: Path, timeout_s: float = 3.0) -> dict:

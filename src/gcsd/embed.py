@@ -41,6 +41,7 @@ import signal
 from collections.abc import Callable
 from typing import Protocol, Union, runtime_checkable
 
+from . import statelock
 from .config import Config
 from .gcs import GCS
 from .sim import Limits, Setpoint, VehicleState
@@ -75,16 +76,20 @@ async def serve(config: Config, backend: Backends, stop: asyncio.Event,
     bound and every client channel tried (the GCS object then gives the real ports:
     `gcs.channels[i].local_address`)."""
     config.state_dir.mkdir(parents=True, exist_ok=True)
-    gcs = build(config, backend)
-    runner = asyncio.create_task(gcs.run(stop))
-    if started is not None:
-        opened = asyncio.create_task(gcs.ready.wait())
-        await asyncio.wait({runner, opened}, return_when=asyncio.FIRST_COMPLETED)
-        if opened.done():
-            started(gcs)
-        else:
-            opened.cancel()
-    await runner
+    lock = statelock.acquire(config.state_dir)  # one daemon per state_dir (StateDirBusy otherwise)
+    try:
+        gcs = build(config, backend)
+        runner = asyncio.create_task(gcs.run(stop))
+        if started is not None:
+            opened = asyncio.create_task(gcs.ready.wait())
+            await asyncio.wait({runner, opened}, return_when=asyncio.FIRST_COMPLETED)
+            if opened.done():
+                started(gcs)
+            else:
+                opened.cancel()
+        await runner
+    finally:
+        lock.release()
 
 
 def run(config: Config, backend: Backends) -> int:
