@@ -5,7 +5,8 @@ one vehicle's cost.
     python -m bench --quick              # smoke run (about 1 minute)
     python -m bench throughput latency   # just these; also: harness, vehicle, params, param_flood, mission,
                                          # signing, swarm, ftp, fleet (the MQTT fleet, bench/fleet.py),
-                                         # lossy (mission upload time vs loss, bench/lossy.py)
+                                         # lossy (mission upload time vs loss, bench/lossy.py),
+                                         # logs (flight-log download and capture, bench/logs.py)
     python -m bench --routers mavproxy   # only some routers (default gcsd,mavlink-router,mavproxy)
 
 mavlink-router is the binary in $GCSD_MAVLINK_ROUTER (or mavlink-routerd on PATH); without it the
@@ -35,6 +36,7 @@ if __package__ in (None, ""):  # run as a script: python bench/run.py
 
 from bench import fleet as bench_fleet  # noqa: E402
 from bench import ftp as bench_ftp  # noqa: E402
+from bench import logs as bench_logs  # noqa: E402
 from bench import lossy as bench_lossy  # noqa: E402
 from bench import measure  # noqa: E402
 from bench import mission as bench_mission  # noqa: E402
@@ -61,7 +63,7 @@ from bench.routers import (  # noqa: E402
 )
 
 WHAT = ("harness", "throughput", "latency", "vehicle", "params", "param_flood", "mission", "signing", "swarm",
-        "ftp", "fleet", "lossy")
+        "ftp", "fleet", "lossy", "logs")
 ROUTERS = {"gcsd": "gcsd", "mavlink-router": "mavlink-router", "mavproxy": "MAVProxy"}  # name -> column
 LATENCY_RATE = 1000
 
@@ -232,13 +234,13 @@ class Runner:
     # ----------------------------------------------------------------------------- measurements
     def run(self) -> None:
         a = self.a
-        if "gcsd" in a.routers or a.what & {"vehicle", "params", "param_flood", "mission", "signing", "ftp"}:
+        if "gcsd" in a.routers or a.what & {"vehicle", "params", "param_flood", "mission", "signing", "ftp", "logs"}:
             ok, text = gcsd_available(self.gcsd_env)
             self.res["gcsd_version"] = text
             if not ok:
                 self.notes.append(f"gcsd not runnable ({text}); its columns are n/a")
                 a.routers = [r for r in a.routers if r != "gcsd"]
-                a.what -= {"vehicle", "params", "param_flood", "mission", "signing", "ftp"}
+                a.what -= {"vehicle", "params", "param_flood", "mission", "signing", "ftp", "logs"}
                 log(f"gcsd not runnable: {text}")
         if "mavlink-router" in a.routers and a.what & {"throughput", "latency"}:
             self.mavlink_router, how = mavlink_router_binary()
@@ -271,6 +273,8 @@ class Runner:
             self.res["fleet"] = bench_fleet.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
         if "lossy" in a.what:  # bench/lossy.py: upload time vs loss, adaptive re-requests vs a fixed 1 s
             self.res["lossy"] = bench_lossy.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
+        if "logs" in a.what:  # bench/logs.py: 10 MB log download, capture at 921 600 baud
+            self.res["logs"] = bench_logs.measure(self.workdir / "logs", self.a.quick, getattr(self, "gcsd_env", None))
 
     def harness(self) -> None:
         a = self.a
@@ -466,6 +470,9 @@ class Runner:
             out += ["", bench_fleet.table(self.res["fleet"])]
         if self.res.get("lossy"):
             out += ["", bench_lossy.table(self.res["lossy"])]
+        if self.res.get("logs"):
+            out += ["", "Flight logs: 10 MB log download (LOG_REQUEST_DATA), capture at 921 600 baud (bench/logs.py)",
+                    "", bench_logs.table(self.res["logs"])]
         return "\n".join(out)
 
 

@@ -1,10 +1,14 @@
-"""The log protocol's server core (as ArduPilot's AP_Logger_MAVLinkLogTransfer) and the log
-directory: listing, chunking, resuming at any offset, rotation."""
+"""The log protocol's server core (as ArduPilot's AP_Logger_MAVLinkLogTransfer), the log
+directory (listing, chunking, resuming at any offset, rotation) and LOG_DATA's fast packing."""
 
 from __future__ import annotations
 
 import os
 
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from gcsd.logs.fastpack import LogData
 from gcsd.logs.store import LogEntry, LogStore
 from gcsd.logs.transfer import Chunk, EntryMsg, LogTransfer
 
@@ -157,3 +161,19 @@ def test_a_finished_log_reopened_keeps_its_start_time_and_size(tmp_path):
     assert os.path.getsize(tmp_path / "00000001.BIN") == 400
     assert store.entries()[0].time_utc == 1_700_000_000
     assert store.reopen("../etc") is None
+
+
+# --- LOG_DATA's fast packing --------------------------------------------------------------------
+@pytest.mark.parametrize("data", [bytes(range(90)), b"abc", b"", bytes(89) + b"\x01", b"\x01" + bytes(89)])
+@pytest.mark.parametrize(("v1", "signed"), [(False, False), (True, False), (False, True)])
+def test_fast_log_data_packs_the_bytes_pymavlink_packs(data, v1, signed):
+    def mav():
+        m = M.MAVLink(None, srcSystem=7, srcComponent=1)
+        m.seq = 200
+        if signed:
+            m.signing.secret_key, m.signing.link_id, m.signing.timestamp = bytes(32), 3, 1000
+            m.signing.sign_outgoing = True
+        return m
+
+    slow = M.MAVLink_log_data_message(5, 123_456, len(data), data.ljust(90, b"\0")).pack(mav(), force_mavlink1=v1)
+    assert LogData(5, 123_456, len(data), data).pack(mav(), force_mavlink1=v1) == slow

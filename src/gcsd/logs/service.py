@@ -33,9 +33,10 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from ..channel import MAX_FRAME_BYTES
 from ..services import Incoming, Service
 from .capture import Capture, Close, Open, Status, Write
+from .fastpack import LogData
 from .simlog import FlightRecorder
 from .store import READ_MAX, LogFile, LogStore, finish_off_loop
-from .transfer import DATA_BYTES, Chunk, EntryMsg, LogTransfer
+from .transfer import Chunk, EntryMsg, LogTransfer
 
 log = structlog.get_logger("gcsd.logs")
 
@@ -156,7 +157,7 @@ class FlightLogService(Service):
                 t.taken()
             else:
                 data = self._read(served, item)
-                if not send(M.MAVLink_log_data_message(item.id, item.ofs, len(data), data.ljust(DATA_BYTES, b"\0"))):
+                if not send(LogData(item.id, item.ofs, len(data), data)):
                     return now + 0.001
                 t.sent(len(data))
                 self.counters_.bytes_served += len(data)
