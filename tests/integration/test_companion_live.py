@@ -49,7 +49,8 @@ def _keep_reading(c: Client, seconds: float) -> None:
 
 
 def _run_cli_while_reading(c: Client, *argv: str) -> subprocess.CompletedProcess:
-    """The CLI in the background while the untouched channel's station goes on reading."""
+    """The CLI in the background while the untouched channel's station goes on reading (its
+    frames are timed when read: a pause in reading would look like a gap)."""
     proc = subprocess.Popen([sys.executable, "-m", "gcsd", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     while proc.poll() is None:
@@ -79,10 +80,10 @@ def test_channel_add_and_remove_at_run_time_leave_the_other_channels_alone(daemo
     saved = yaml.safe_load((Path(d.config.state_dir) / "channels.yaml").read_text())
     assert saved == {"channels": [{"name": "lte", "type": "udp-server", "address": "127.0.0.1:0"}]}
 
-    refused = _cli("channel", "add", "-c", str(conf), "bad", "udp-server", "nowhere")
+    refused = _run_cli_while_reading(station, "channel", "add", "-c", str(conf), "bad", "udp-server", "nowhere")
     assert refused.returncode == 2
     assert refused.stderr.strip() == "gcsd channel add: address: expected HOST:PORT, got 'nowhere'"
-    clash = _cli("channel", "add", "-c", str(conf), "gcs", "udp-client", "127.0.0.1:9")
+    clash = _run_cli_while_reading(station, "channel", "add", "-c", str(conf), "gcs", "udp-client", "127.0.0.1:9")
     assert clash.returncode == 2 and "already running" in clash.stderr
 
     removed = _run_cli_while_reading(station, "channel", "remove", "-c", str(conf), "lte")
