@@ -3,7 +3,9 @@ components (one VehicleNode per simulated vehicle) and handles no message itself
 
 Receive path for every good frame on a channel: the channel has it verified first (the signing
 check, `_verify`; a frame that fails changes nothing but the reject counters, see channel.py),
-then here: drop it if it is a frame this daemon forwarded less than LOOP_WINDOW_S ago (a
+then here: drop it if the same bytes came in lately on a link of the same redundant group (or on
+any channel, with routing.dedup_ms; counted `duplicates`), drop it if it is a frame this daemon
+forwarded less than LOOP_WINDOW_S ago (a
 forwarding loop, counted `loop_dropped`; dedup.py), mark the channel active (anything but
 RADIO_STATUS), ask the router (learn, forward, process locally?), write the raw frame to the
 chosen channels (remembering it), then hand the decoded message to the local component(s) it is for. Frames with a bad CRC are dropped and counted, or, on a
@@ -36,9 +38,10 @@ from .channel import Channel, Peer
 from .clock import Clock
 from .codec import Frame
 from .config import MAX_CHANNELS, Config
-from .config_schema import ChannelConfig
 from .config_mqtt import route_capacity
+from .config_schema import ChannelConfig
 from .dedup import LOOP_WINDOW_S, RecentFrames
+from .livechannels import LiveChannels, load_specs
 from .msgids import HEARTBEAT as MSG_ID_HEARTBEAT
 from .msgids import is_radio
 from .node import VehicleNode
@@ -48,7 +51,6 @@ from .services.signing import SigningService
 from .signgate import signed_copy
 from .signing import SAVE_INTERVAL_S, SigningManager, SigningStore
 from .tlog import TlogWriter
-from .livechannels import LiveChannels, load_specs
 from .transport import ChannelStartError
 from .vehicles import vehicle_type
 
@@ -100,6 +102,10 @@ class GCS:
         self.router = Router({(n.sysid, n.compid) for n in self.nodes}, [ch.policy for ch in self.channels],
                              RouteTable(route_capacity((c.type for c in config.channels), MAX_ROUTES)))
         self.loops = RecentFrames(LOOP_WINDOW_S)  # frames forwarded lately: one coming back is a loop
+        # routing.dedup_ms: every frame; else the frames of redundant link groups, within LOOP_WINDOW_S
+        dedup_ms = config.routing.dedup_ms
+        self.dedup = RecentFrames(dedup_ms / 1000 if dedup_ms else LOOP_WINDOW_S)
+        self.dedup_all = dedup_ms > 0
         self.bad_crc_forwarded = 0
         for ch in self.channels:
             self._wire(ch)
@@ -174,6 +180,9 @@ class GCS:
     def on_frame(self, channel: Channel, frame: Frame, now: float) -> None:
         """Route one accepted frame and hand it to the local components it is for (inside the
         channel's receive boundary)."""
+        if (self.dedup_all or channel.policy.group is not None) and self.dedup.check(frame.raw, now):
+            channel.stats.duplicates += 1  # the copy that came the other way (a group), or dedup_ms
+            return
         if self.loops.seen(frame.raw, now):  # a frame we forwarded, back again: a loop (dedup.py)
             channel.stats.loop_dropped += 1
             return
