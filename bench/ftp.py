@@ -381,24 +381,8 @@ def table(results: dict[str, Result]) -> str:
 def main(argv: list[str]) -> int:
     if argv and argv[0] == "serve-mavsdk":
         return serve_mavsdk(int(argv[1]), argv[2])
-    import argparse
-    import shutil
-    import tempfile
-
-    p = argparse.ArgumentParser(prog="python bench/ftp.py", description=__doc__.split("\n")[0])
-    p.add_argument("--quick", action="store_true", help="2 x 10 MB and 5 x param.pck per server")
-    p.add_argument("--keep", action="store_true", help="keep the temporary directory (configs, logs)")
-    a = p.parse_args(argv)
-    workdir = Path(tempfile.mkdtemp(prefix="gcsd-bench-ftp-"))
-    try:
-        results = measure(workdir, a.quick)
-    finally:
-        if a.keep:
-            log(f"kept {workdir}")
-        else:
-            shutil.rmtree(workdir, ignore_errors=True)
-    print(table(results))
-    return 1 if any(r.error for r in results.values()) else 0
+    return report.standalone(argv, "ftp", __doc__, "2 x 10 MB and 5 x param.pck per server", measure, table,
+                             lambda results: any(r.error for r in results.values()))
 
 
 if __name__ == "__main__":

@@ -46,6 +46,7 @@ if __package__ in (None, ""):  # run as a script: python bench/logs.py
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from bench import report
 from bench.frames import walk_frames
 from bench.routers import Launched, cpu_seconds, free_udp_port, gcsd_config, start_gcsd
 
@@ -310,24 +311,8 @@ def table(r: Result) -> str:
 
 
 def main(argv: list[str]) -> int:
-    import argparse
-    import shutil
-    import tempfile
-
-    p = argparse.ArgumentParser(prog="python bench/logs.py", description=__doc__.split("\n")[0])
-    p.add_argument("--quick", action="store_true", help="one download, 10 s of capture")
-    p.add_argument("--keep", action="store_true", help="keep the temporary directory")
-    a = p.parse_args(argv)
-    workdir = Path(tempfile.mkdtemp(prefix="gcsd-bench-logs-"))
-    try:
-        result = measure(workdir, a.quick)
-    finally:
-        if a.keep:
-            log(f"kept {workdir}")
-        else:
-            shutil.rmtree(workdir, ignore_errors=True)
-    print(table(result))
-    return 1 if result.error else 0
+    return report.standalone(argv, "logs", __doc__, "one download, 10 s of capture", measure, table,
+                             lambda r: r.error is not None)
 
 
 if __name__ == "__main__":

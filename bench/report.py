@@ -67,3 +67,29 @@ def routers_table(labels: dict[str, str], rows: Iterable[RouterRow]) -> str:
         return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
 
     return "\n".join([line(head), "  ".join("-" * w for w in widths), *map(line, body)])
+
+
+def standalone(argv: list[str], prog: str, doc: str, quick_help: str, measure: Callable, table: Callable,
+               failed: Callable) -> int:
+    """`python bench/NAME.py [--quick] [--keep]`: one measurement alone in a scratch directory,
+    its table on stdout; exit 1 when `failed(result)`."""
+    import argparse
+    import shutil
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    p = argparse.ArgumentParser(prog=f"python bench/{prog}.py", description=doc.split("\n")[0])
+    p.add_argument("--quick", action="store_true", help=quick_help)
+    p.add_argument("--keep", action="store_true", help="keep the temporary directory (configs, logs)")
+    a = p.parse_args(argv)
+    workdir = Path(tempfile.mkdtemp(prefix=f"gcsd-bench-{prog}-"))
+    try:
+        result = measure(workdir, a.quick)
+    finally:
+        if a.keep:
+            print(f"kept {workdir}", file=sys.stderr, flush=True)
+        else:
+            shutil.rmtree(workdir, ignore_errors=True)
+    print(table(result))
+    return 1 if failed(result) else 0

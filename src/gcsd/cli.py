@@ -111,6 +111,15 @@ def _check_config(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _config_of(args: argparse.Namespace):
+    """`-c FILE`'s configuration (the built-in default without it), or None with its problems printed."""
+    try:
+        return default_config() if args.config is None else load_config(args.config)
+    except ConfigError as exc:
+        _print_problems(exc)
+        return None
+
+
 def _print_problems(error: ConfigError) -> None:
     for problem in error.problems:
         print(problem, file=sys.stderr)
@@ -122,10 +131,8 @@ def _status(args: argparse.Namespace) -> int:
 
     from gcsd import control
 
-    try:
-        config = default_config() if args.config is None else load_config(args.config)
-    except ConfigError as exc:
-        _print_problems(exc)
+    config = _config_of(args)
+    if config is None:
         return EXIT_BAD_CONFIG
     path = Path(config.state_dir) / control.SOCKET_NAME
     try:
@@ -160,10 +167,8 @@ def _logs(args: argparse.Namespace) -> int:
 
     from gcsd.logs.listing import format_logs, list_logs
 
-    try:
-        config = default_config() if args.config is None else load_config(args.config)
-    except ConfigError as exc:
-        _print_problems(exc)
+    config = _config_of(args)
+    if config is None:
         return EXIT_BAD_CONFIG
     logs = list_logs(config)
     print(json.dumps(logs, indent=2) if args.json else format_logs(logs, config))
