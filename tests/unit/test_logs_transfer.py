@@ -155,12 +155,23 @@ def test_a_finished_log_reopened_keeps_its_start_time_and_size(tmp_path):
     f = store.create(1_700_000_000.0)
     f.write_at(0, b"a" * 200)
     f.finish()
-    g = store.reopen("00000001.BIN")
+    g = store.reopen("00000001.BIN", 1_700_000_000.0)
     g.write_at(200, b"b" * 200)
     g.finish()
     assert os.path.getsize(tmp_path / "00000001.BIN") == 400
     assert store.entries()[0].time_utc == 1_700_000_000
-    assert store.reopen("../etc") is None
+    assert store.reopen("../etc", 0.0) is None
+
+
+def test_a_late_close_of_the_old_handle_leaves_the_reopened_log_open(tmp_path):
+    store = LogStore(tmp_path, max_files=1, min_free_mb=0)
+    old = store.create(1.0)
+    new = store.reopen("00000001.BIN", 1.0)  # the stream resumed before the old handle was finished
+    old.finish()
+    assert store.is_open("00000001.BIN")
+    store.create(2.0).finish()  # max_files 1: rotation must not delete the log being written
+    assert (tmp_path / "00000001.BIN").exists()
+    new.finish()
 
 
 # --- LOG_DATA's fast packing --------------------------------------------------------------------

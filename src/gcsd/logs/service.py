@@ -77,7 +77,7 @@ class FlightLogService(Service):
         self._sim_file: LogFile | None = None
         self._disarmed_s: float | None = None
         self._captured: dict[int, LogFile] = {}  # capture key -> file
-        self._captured_names: dict[int, str] = {}
+        self._captured_names: dict[int, tuple[str, float]] = {}  # key -> (file, start)
         self._capture_channels: dict[int, object] = {}
         store.ensure()
 
@@ -273,15 +273,15 @@ class FlightLogService(Service):
             log.error("flight_log_create_failed", error=str(exc))
             return
         self._captured[e.key] = f
-        self._captured_names[e.key] = f.name
+        self._captured_names[e.key] = (f.name, wall_s)
         if len(self._captured_names) > 64:
             del self._captured_names[min(self._captured_names)]
 
     def _write(self, e: Write) -> None:
         f = self._captured.get(e.key)
         if f is None:  # finished after a silence, and the stream goes on: the same file again
-            name = self._captured_names.get(e.key)
-            f = self.store.reopen(name) if name is not None else None
+            known = self._captured_names.get(e.key)
+            f = self.store.reopen(*known) if known is not None else None
             if f is None:
                 self.counters_.write_refused += 1
                 return

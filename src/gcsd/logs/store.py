@@ -11,7 +11,7 @@
   thread; `room_ok()` says whether min_free_mb still holds (checked every CHECK_EVERY_BYTES);
   `finish()` fsyncs, closes and stamps the start time: it blocks, so the service runs it on a
   worker thread (`finish_off_loop`).
-- `reopen(name)`: a finished log opened for writing again (its start time kept).
+- `reopen(name, start)`: a finished log opened for writing again.
 - `read(name, offset, count)`: one bounded pread (LOG_DATA chunks, at most 90 bytes).
 - `erase(keep)`: every log except the ones open for writing (LOG_ERASE).
 
@@ -140,7 +140,7 @@ class LogStore:
         log.info("flight_log_started", file=str(f.path))
         return f
 
-    def reopen(self, name: str) -> LogFile | None:
+    def reopen(self, name: str, start_wall_s: float) -> LogFile | None:
         """A finished log written to again (a captured stream that resumed after a silence)."""
         if not NAME.fullmatch(name):
             return None
@@ -150,7 +150,7 @@ class LogStore:
         except OSError:
             return None
         st = os.fstat(fd)
-        f = LogFile(self, name, fd, st.st_mtime)
+        f = LogFile(self, name, fd, start_wall_s)
         f.size = st.st_size
         with self._lock:
             self._open[name] = f
@@ -203,7 +203,8 @@ class LogStore:
 
     def closed(self, f: LogFile) -> None:
         with self._lock:
-            self._open.pop(f.name, None)
+            if self._open.get(f.name) is f:  # not a reopened successor
+                del self._open[f.name]
         log.info("flight_log_finished", file=str(f.path), size=f.size)
 
 
