@@ -85,8 +85,10 @@ async def run_daemon(config: Config) -> int:
 
 
 def _reload(gcs: GCS, loop: asyncio.AbstractEventLoop) -> None:
-    """SIGHUP: re-read the configuration file and apply its channels (livechannels.py); a bad
-    file is logged, line by line, and changes nothing."""
+    """SIGHUP: write out changed state (parameters, signing timestamp), then re-read the
+    configuration file and apply its channels (livechannels.py); a bad file is logged, line by
+    line, and changes nothing. The daemon keeps running whatever the file says."""
+    gcs.sync_state()
     path = gcs.config.source.file
     if path is None:
         log.warning("reload_ignored", reason="running the built-in default configuration: no file to re-read")

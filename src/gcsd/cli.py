@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
+import signal
 import sys
 
 import structlog
@@ -75,6 +77,10 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _run(args: argparse.Namespace) -> int:
+    # SIGHUP's default action ends the process: ignored from here until the daemon installs its
+    # own handler (app.py), so a reload that comes early never kills a starting daemon
+    with contextlib.suppress(ValueError):  # not the main thread: signals are not ours to set
+        signal.signal(signal.SIGHUP, signal.SIG_IGN)
     config_file = getattr(args, "config", None)
     try:
         config = default_config() if config_file is None else load_config(config_file)

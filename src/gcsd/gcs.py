@@ -320,6 +320,18 @@ class GCS:
         finally:  # whatever ended the serving, what was changed is written out
             self._flush()
 
+    def sync_state(self) -> None:
+        """Write out what was changed (parameters, the signing timestamp) and keep running: SIGHUP
+        does this before it re-reads the configuration, so nothing acknowledged waits on a timer
+        while channels are reopened (app.py)."""
+        now = self.clock.now()
+        for node in self.nodes:
+            with self.errors.guard("sync", now, sysid=node.sysid):
+                node.sync()
+        with self.errors.guard("sync", now):
+            self.signing_manager.save_if_changed()  # not "clean": the daemon goes on signing
+        log.info("state_synced", vehicles=len(self.nodes))
+
     def _flush(self) -> None:
         for node in self.nodes:
             try:

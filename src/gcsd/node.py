@@ -155,6 +155,10 @@ class VehicleNode:
         """Flush state at a clean stop (waits for a parameter write in flight, writes the rest)."""
         self.param_writer.flush()
 
+    def sync(self) -> None:
+        """Write out changed state now and keep running (SIGHUP)."""
+        self.param_writer.sync()
+
     def counters(self) -> dict[str, int]:
         """This vehicle's counted events for `gcsd status` (its services' and the text queue's)."""
         out = {"statustext_dropped": self.statustext.dropped}

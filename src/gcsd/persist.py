@@ -10,8 +10,9 @@ and `persist_failed(error)` take the outcome. This adapter only does the I/O:
 - When the timer fires the text is taken and written by `write_atomic` (write, fsync, rename,
   fsync the directory) on this file's own worker thread: the loop never waits for the disk.
   At most one write per file is in flight, so writes land in order.
-- `flush()` at a clean stop: cancel the timer, wait for the write in flight, write what is
-  still dirty, synchronously, and stop the worker thread.
+- `sync()` (SIGHUP): cancel the timer, wait for the write in flight, write what is still
+  dirty, synchronously; later changes are written behind as before.
+- `flush()` at a clean stop: `sync()`, then no more writes, and the worker thread stops.
 
 With no running loop (a node built outside asyncio: the unit-test harness, a script) there is
 nothing to block: `kick` writes at once, synchronously, when the file is due, and otherwise
@@ -104,9 +105,11 @@ class WriteBehind:
         else:
             self.source.persist_failed(str(error))
 
-    def flush(self) -> None:
-        """A clean stop: everything still dirty is on disk when this returns."""
-        self._closed = True
+    def sync(self) -> None:
+        """Everything dirty now is on disk when this returns, and the write-behind goes on
+        (SIGHUP: nothing acknowledged waits on a timer while the configuration is re-read)."""
+        if self._closed:
+            return
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
@@ -114,6 +117,11 @@ class WriteBehind:
             inflight, self._inflight = self._inflight, None
             self._outcome(inflight.exception())  # waits for the write in flight
         self._write_now(self.source.take_persist(self._now(), force=True))
+
+    def flush(self) -> None:
+        """A clean stop: everything still dirty is on disk when this returns."""
+        self.sync()
+        self._closed = True
         if self._executor is not None:
             self._executor.shutdown(wait=True)
             self._executor = None

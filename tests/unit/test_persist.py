@@ -126,3 +126,25 @@ def test_without_an_event_loop_a_due_write_is_made_at_once_and_the_rest_by_flush
     assert len(write.calls) == 1 and read_parm(tmp_path / "mav.parm")[0]["ANGLE_MAX"] == 4500
     writer.flush()
     assert len(write.calls) == 2 and read_parm(tmp_path / "mav.parm")[0]["ANGLE_MAX"] == 4600
+
+
+def test_sync_writes_what_is_dirty_now_and_the_write_behind_goes_on(tmp_path):
+    write = RecordingWrite(delay_s=0.1)
+    svc, writer = service_and_writer(tmp_path, write)
+
+    async def main() -> None:
+        param_set(svc, "ANGLE_MAX", 4500, now=time.monotonic())
+        while not write.calls:
+            await asyncio.sleep(0.01)
+        param_set(svc, "ANGLE_MAX", 4600, now=time.monotonic())  # due only a second after the first
+        writer.sync()  # SIGHUP: waits for the write in flight, writes the rest now
+        assert writer.writes == 2 and read_parm(tmp_path / "mav.parm")[0]["ANGLE_MAX"] == 4600
+        param_set(svc, "ANGLE_MAX", 4700, now=time.monotonic())
+        deadline = time.monotonic() + 3.0
+        while writer.writes < 3 and time.monotonic() < deadline:
+            await asyncio.sleep(0.02)
+        assert writer.writes == 3, "after a sync, changes are still written behind"
+        writer.flush()
+
+    asyncio.run(main())
+    assert read_parm(tmp_path / "mav.parm")[0]["ANGLE_MAX"] == 4700
