@@ -38,6 +38,7 @@ import yaml
 from yaml.nodes import MappingNode, SequenceNode
 
 from .config_logs import read_flight_logs
+from .config_can import read_can
 from .config_companion import (
     COMPANION_KEYS,
     read_bauds,
@@ -151,8 +152,8 @@ def _check_depth(text: str, filename: str) -> None:
 # --- the schema, one function per section -------------------------------------------------------
 
 _TOP_KEYS = ("vehicle", "state_dir", "params_file", "gcs", "mission", "ftp", "signing", "channels", "log",
-             "serial_control", "routing", "flight_logs")
-_VEHICLE_KEYS = ("type", "sysid", "compid", "count", "home", "speedup")
+             "serial_control", "routing", "flight_logs", "can")
+_VEHICLE_KEYS = ("type", "sysid", "compid", "count", "home", "speedup", "camera", "gimbal")
 _MISSION_KEYS = ("max_items", "max_fence", "max_rally", "retry_ms")
 _CHANNEL_KEYS = ("name", "type", "address", "device", "baud", "mavlink", "streams", "options",
                  "private", "bandwidth", "max_peers", "broadcast", *MQTT_KEYS, *COMPANION_KEYS)
@@ -185,6 +186,7 @@ def _config(r: Reader, top: Section) -> Config:
         serial_control=_serial_control(r, top["serial_control"], channels),
         routing=read_routing(r, top["routing"]),
         flight_logs=read_flight_logs(r, top["flight_logs"], [c.name for c in channels]),
+        can=read_can(r, top["can"]),
     )
 
 
@@ -230,6 +232,7 @@ def _vehicle(r: Reader, v: Section) -> VehicleConfig:
                   lon=r.number(home["lon"], Home.lon, -180, 180),
                   alt=r.number(home["alt"], Home.alt, -1000, 100_000)),
         speedup=r.number(v["speedup"], 1.0, 0, MAX_SPEEDUP, low_open=True),
+        camera=r.boolean(v["camera"], False), gimbal=r.boolean(v["gimbal"], False),
     )
 
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 
+from .config_can import CanConfig
 from .config_companion import ChannelFilter, RoutingConfig
 from .config_logs import FlightLogsConfig
 from .config_mqtt import MqttConfig
@@ -61,6 +62,8 @@ class VehicleConfig:
     count: int = 1
     home: Home = Home()
     speedup: float = 1.0
+    camera: bool = False  # a simulated MAVLink camera per vehicle (compid 100; gcsd.camera)
+    gimbal: bool = False  # a simulated 3-axis gimbal, the autopilot its gimbal manager (gcsd.gimbal)
 
     def __post_init__(self) -> None:
         if self.compid is None:
@@ -177,6 +180,7 @@ class Config:
     serial_control: tuple[SerialControlPort, ...] = ()
     routing: RoutingConfig = field(default_factory=RoutingConfig)
     flight_logs: FlightLogsConfig = field(default_factory=FlightLogsConfig)
+    can: CanConfig = field(default_factory=CanConfig)
     source: Source = field(default=Source(), compare=False, repr=False)
 
 

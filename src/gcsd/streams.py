@@ -33,7 +33,8 @@ STREAM_MESSAGES: dict[str, tuple[int, ...]] = {
     "extra2": (_M.MAVLINK_MSG_ID_VFR_HUD,),
     "extra3": (
         _M.MAVLINK_MSG_ID_AHRS, _M.MAVLINK_MSG_ID_WIND, _M.MAVLINK_MSG_ID_SYSTEM_TIME,
-        _M.MAVLINK_MSG_ID_BATTERY_STATUS, _M.MAVLINK_MSG_ID_EKF_STATUS_REPORT, _M.MAVLINK_MSG_ID_VIBRATION,
+        _M.MAVLINK_MSG_ID_BATTERY_STATUS, _M.MAVLINK_MSG_ID_GIMBAL_DEVICE_ATTITUDE_STATUS,  # with a gimbal
+        _M.MAVLINK_MSG_ID_EKF_STATUS_REPORT, _M.MAVLINK_MSG_ID_VIBRATION,
     ),
     "params": (),  # a list download is streamed by ParamService.pending, paced by the link, not a bucket
     "adsb": (_M.MAVLINK_MSG_ID_ADSB_VEHICLE,),

@@ -277,6 +277,8 @@ PRODUCERS: dict[int, Producer] = {
     M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: extended_sys_state,
 }
 
+from .gimbal.telemetry import GIMBAL_PRODUCERS
 from .vehicle_telemetry import VEHICLE_PRODUCERS
 
 PRODUCERS.update(VEHICLE_PRODUCERS)
+PRODUCERS.update(GIMBAL_PRODUCERS)

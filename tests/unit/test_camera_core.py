@@ -144,6 +144,11 @@ def test_messages_describe_the_camera_and_each_photo():
     assert (feedback.lat, feedback.lng, feedback.img_idx) == (captured.lat, captured.lon, 1)
     assert feedback.flags == M.CAMERA_FEEDBACK_PHOTO
     assert messages.capture_status(0, cam, 1.0).image_count == 1
+    mav = M.MAVLink(None, 1, 100)
+    for msg in (info, messages.settings(0, cam), messages.capture_status(0, cam, 1.0),
+                messages.storage_information(0, cam), messages.video_stream_information(cam), captured, feedback):
+        decoded = M.MAVLink(None).decode(bytearray(msg.pack(mav)))  # every message packs and decodes
+        assert decoded.get_type() == msg.get_type()
 
 
 def test_jpeg_exif_holds_the_photos_position():

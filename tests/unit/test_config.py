@@ -195,7 +195,7 @@ BAD_CONFIGS = [
     ("vehicle:\n  sysdi: 2\n", "gcsd.yaml:2: vehicle.sysdi: unknown key; did you mean 'sysid'?"),
     ("chanels: []\n", "gcsd.yaml:1: chanels: unknown key; did you mean 'channels'?"),
     ("colour: red\n", "gcsd.yaml:1: colour: unknown key (known keys: vehicle, state_dir, params_file, gcs, "
-                      "mission, ftp, signing, channels, log, serial_control, routing, flight_logs)"),
+                      "mission, ftp, signing, channels, log, serial_control, routing, flight_logs, can)"),
     ("vehicle: {sysid: 1, sysid: 2}\n", "gcsd.yaml:1: vehicle.sysid: duplicate key"),
     ("vehicle: copter\n", "gcsd.yaml:1: vehicle: expected a mapping, got 'copter'"),
     ("vehicle: {type: coptr}\n", "gcsd.yaml:1: vehicle.type: expected copter|plane|rover|sub|tracker|blimp|"
@@ -343,7 +343,7 @@ def test_all_problems_are_reported_at_once_in_line_order():
         log: {level: loud}
     """) == [
         "gcsd.yaml:3: vehicle.sysid: expected an integer 1..255, got 300",
-        "gcsd.yaml:4: vehicle.colour: unknown key (known keys: type, sysid, compid, count, home, speedup)",
+        "gcsd.yaml:4: vehicle.colour: unknown key (known keys: type, sysid, compid, count, home, speedup, camera, gimbal)",
         "gcsd.yaml:8: channels[0].address: expected HOST:PORT, got 'foo'",
         "gcsd.yaml:9: channels[1].name: duplicate channel name 'gcs' (also channels[0])",
         "gcsd.yaml:12: log.level: expected debug|info|warning|error, got 'loud'",

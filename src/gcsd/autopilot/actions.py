@@ -159,6 +159,9 @@ class Actions:
     def set_roi(self, location: tuple[float, float, float] | None) -> bool:
         if location is not None and not location_ok(*location):
             return False
+        if self.mount_roi is not None and self.mount_roi(location):
+            self.roi = None  # a gimbal that pans points the camera; the vehicle keeps its heading
+            return True
         self.roi = location
         if location is not None:
             self.yaw_target = None
@@ -272,6 +275,10 @@ class Actions:
 
     # --- mission DO items --------------------------------------------------------------------------
     def do_command(self, item: MissionItem) -> None:
+        payload = self.payload_items.get(item.command)  # the camera's mission items, when it has one
+        if payload is not None:
+            payload(item)
+            return
         handler = DO_TABLE.get(item.command)
         if handler is not None:
             handler(self, item)

@@ -22,10 +22,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from ..mission.items import MissionItem
 from ..sim import MAX_STEP_S, SimulatedVehicle
 from ..sim.geo import bearing_deg, distance_m, ne_m
 from ..sim.state import Kind, Setpoint
@@ -76,6 +78,9 @@ class Autopilot(Actions):
         self.hold: Setpoint = Setpoint(Kind.IDLE)
         self.speed_override: float | None = None
         self.roi: tuple[float, float, float] | None = None
+        # payload hooks (gcsd.gimbal, gcsd.camera): an ROI the gimbal takes, mission items the camera runs
+        self.mount_roi: Callable[[tuple[float, float, float] | None], bool] | None = None
+        self.payload_items: dict[int, Callable[[MissionItem], None]] = {}
         self.yaw_target: float | None = None
         self.paused: Setpoint | None = None
         self.home_locked = False

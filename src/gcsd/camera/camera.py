@@ -131,7 +131,8 @@ class Camera:
 
     def set_trigger_distance(self, distance_m: float, shoot_now: float) -> int:
         self.trigger_distance_m = max(0.0, distance_m)
-        self._last_trigger_at = None
+        if self.trigger_distance_m == 0:
+            self._last_trigger_at = None  # as AP_Camera: the last position is forgotten only while off
         if shoot_now == 1:
             self.pending += 1
         return ACCEPTED

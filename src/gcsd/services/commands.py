@@ -78,6 +78,12 @@ class CommandService(Service):
         self.table = table
         self.unsupported = 0
         self.refused = 0  # commands refused by the edge check
+        self.components: dict[int, dict[int, Callable[[CommandRequest], int]]] = {}  # another local compid's table
+
+    def add_component(self, compid: int, table: dict[int, Callable[[CommandRequest], int]]) -> None:
+        """A local component of this system with its own commands (the camera, compid 100): commands
+        addressed to it run from its table, and its ACKs come from it."""
+        self.components[compid] = table
 
     def counters(self) -> dict[str, int]:
         return {"commands_unsupported": self.unsupported, "commands_refused": self.refused}
@@ -102,15 +108,19 @@ class CommandService(Service):
         self._run(CommandRequest(m.command, (m.param1, m.param2, m.param3, m.param4), m.x, m.y, m.z, m.frame, True, inc))
 
     def _run(self, req: CommandRequest) -> None:
-        handler = self.table.get(req.command)
+        compid = req.inc.frame.target_component
+        table = self.components.get(compid)
+        if table is None:
+            table, compid = self.table, self.node.compid
+        handler = table.get(req.command)
         if handler is None:
             self.unsupported += 1
-            self._ack(req.inc, req.command, M.MAV_RESULT_UNSUPPORTED)
+            self._ack(req.inc, req.command, M.MAV_RESULT_UNSUPPORTED, compid)
             return
         checked = check(RULES.get(req.command, STRICT), (*req.params, req.x, req.y, req.z), req.frame)
         if isinstance(checked, int):
             self.refused += 1
-            self._ack(req.inc, req.command, checked)
+            self._ack(req.inc, req.command, checked, compid)
             return
         p1, p2, p3, p4, x, y, z = checked
         req = replace(req, params=(p1, p2, p3, p4), x=x, y=y, z=z)
@@ -118,8 +128,12 @@ class CommandService(Service):
         with self.node.errors.guard(f"command:{req.command}", req.inc.now, channel=req.inc.channel.name,
                                     sysid=req.inc.frame.sysid):
             result = handler(req)
-        self._ack(req.inc, req.command, result)
+        self._ack(req.inc, req.command, result, compid)
 
-    def _ack(self, inc: Incoming, command: int, result: int) -> None:
+    def _ack(self, inc: Incoming, command: int, result: int, from_compid: int | None = None) -> None:
         sysid, compid = inc.sender
-        self.node.reply(inc.channel, M.MAVLink_command_ack_message(command, result, 0, 0, sysid, compid))
+        ack = M.MAVLink_command_ack_message(command, result, 0, 0, sysid, compid)
+        if from_compid is None or from_compid == self.node.compid:
+            self.node.reply(inc.channel, ack)
+        else:
+            inc.channel.send_message(ack, self.node.sysid, from_compid)

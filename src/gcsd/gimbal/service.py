@@ -1,0 +1,126 @@
+"""The gimbal manager on the autopilot component: MAVLink in, the `Mount` core, MAVLink out.
+
+Commands (MAV_RESULT as ArduPilot 4.6 with a mount): DO_GIMBAL_MANAGER_PITCHYAW (x = flags,
+z = gimbal device id), DO_GIMBAL_MANAGER_CONFIGURE (p1/p2 sysid/compid, z = device id),
+DO_MOUNT_CONTROL (z = mode), DO_MOUNT_CONFIGURE (p1 = mode), DO_SET_ROI_SYSID (p1 = the system:
+ACCEPTED). DO_SET_ROI_LOCATION / DO_SET_ROI / DO_SET_ROI_NONE and the mission's ROI items reach
+the mount through the autopilot's `mount_roi` hook (Copter's AutoYaw::set_roi: a gimbal that
+can pan points at the location; the vehicle keeps its own heading). Messages:
+GIMBAL_MANAGER_SET_PITCHYAW (radians, as the command in degrees), GIMBAL_MANAGER_SET_ATTITUDE,
+and GLOBAL_POSITION_INT from other systems (where DO_SET_ROI_SYSID's target is). Values that are
+not finite where a number is needed are ignored (messages) or refused at the edge (commands).
+
+The mount is brought up to `now` (`sync`) whenever anything reads or changes it: a command, a
+message, a telemetry producer (gimbal/telemetry.py), a send pass; so its slew and a pointed
+target follow the vehicle however often it is asked. A change of primary control pushes
+GIMBAL_MANAGER_STATUS on every link at once; warnings go out as STATUSTEXT.
+"""
+
+from __future__ import annotations
+
+import math
+
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from ..services import Incoming, Service
+from ..services.commands import CommandRequest
+from .mount import Mount, Pose
+from .params import NAMES, mount_params
+
+MSG_ID_STATUS = M.MAVLINK_MSG_ID_GIMBAL_MANAGER_STATUS
+
+
+def _finite(*values: float) -> bool:
+    return all(math.isfinite(v) for v in values)
+
+
+class GimbalService(Service):
+    def __init__(self, node, now: float, previous_position_handler=None) -> None:
+        self.node = node
+        self.mount = Mount(mount_params(node.params.get), now)
+        self._previous_position = previous_position_handler  # e.g. an antenna tracker's own
+        for name in NAMES:
+            node.params.on_change(name, self._params_changed)
+
+    def _params_changed(self, _name, _value) -> None:
+        self.mount.set_params(mount_params(self.node.params.get))
+
+    def pose(self) -> Pose:
+        s = self.node.state
+        home = (s.home_lat, s.home_lon, s.home_alt_m) if s.has_home else None
+        return Pose(s.lat, s.lon, s.alt_amsl_m, s.yaw_rad, home)
+
+    def sync(self, now: float) -> Mount:
+        """The mount, stepped to `now`; its warnings sent, a control change pushed."""
+        mount = self.mount
+        mount.step(now, self.pose())
+        for text in mount.take_texts():
+            self.node.send_text(M.MAV_SEVERITY_WARNING, text)
+        if mount.status_changed:
+            mount.status_changed = False
+            for link in self.node.links:
+                link.push(MSG_ID_STATUS)
+        return mount
+
+    # --- commands ------------------------------------------------------------------------------
+    def commands(self):
+        return {
+            M.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW: self.pitchyaw,
+            M.MAV_CMD_DO_GIMBAL_MANAGER_CONFIGURE: self.configure,
+            M.MAV_CMD_DO_MOUNT_CONTROL: self.mount_control,
+            M.MAV_CMD_DO_MOUNT_CONFIGURE: self.mount_configure,
+            M.MAV_CMD_DO_SET_ROI_SYSID: self.roi_sysid,
+        }
+
+    def pitchyaw(self, req: CommandRequest) -> int:
+        mount = self.sync(req.inc.now)
+        return mount.pitchyaw(int(req.x), req.param1, req.param2, req.param3, req.param4, req.z)
+
+    def configure(self, req: CommandRequest) -> int:
+        result = self.sync(req.inc.now).configure(req.param1, req.param2, req.inc.sender, req.z)
+        self.sync(req.inc.now)
+        return result
+
+    def mount_control(self, req: CommandRequest) -> int:
+        mount = self.sync(req.inc.now)
+        return mount.mount_control(req.param1, req.param2, req.param3, req.param4, int(req.x), int(req.y), req.z,
+                                   self.node.state.home_alt_m, req.inc.now)
+
+    def mount_configure(self, req: CommandRequest) -> int:
+        return self.sync(req.inc.now).mount_configure(req.param1)
+
+    def roi_sysid(self, req: CommandRequest) -> int:
+        self.sync(req.inc.now).set_target_sysid(int(req.param1))
+        return M.MAV_RESULT_ACCEPTED
+
+    def roi(self, location: tuple[float, float, float] | None) -> bool:
+        """The autopilot's ROI (lat, lon, alt AMSL; None: none): True when the gimbal takes it."""
+        if not self.mount.params.has_pan:
+            return False  # the vehicle has to turn to point the camera
+        self.sync(self.node.clock.now()).set_roi(location)
+        return True
+
+    # --- messages ------------------------------------------------------------------------------
+    def handle_GIMBAL_MANAGER_SET_PITCHYAW(self, inc: Incoming) -> None:
+        m = inc.msg
+        values = (m.pitch, m.yaw, m.pitch_rate, m.yaw_rate)
+        if any(math.isinf(v) for v in values):
+            return
+        self.sync(inc.now).pitchyaw(m.flags, *(math.degrees(v) for v in values), m.gimbal_device_id)
+
+    def handle_GIMBAL_MANAGER_SET_ATTITUDE(self, inc: Incoming) -> None:
+        m = inc.msg
+        rates = (m.angular_velocity_x, m.angular_velocity_y, m.angular_velocity_z)
+        if any(math.isinf(v) for v in (*m.q, *rates)):
+            return
+        self.sync(inc.now).set_attitude(m.flags, list(m.q), rates, m.gimbal_device_id)
+
+    def handle_GLOBAL_POSITION_INT(self, inc: Incoming) -> None:
+        m = inc.msg
+        self.mount.target_position(inc.frame.sysid, m.lat / 1e7, m.lon / 1e7, m.alt / 1000.0)
+        if self._previous_position is not None:
+            self._previous_position(inc)
+
+    def pending(self, channel, now: float, send) -> float | None:
+        self.sync(now)
+        return None
