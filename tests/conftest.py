@@ -23,9 +23,10 @@ START_TIMEOUT_S = 5.0
 
 
 class RunningDaemon:
-    def __init__(self, config, backend=None) -> None:
+    def __init__(self, config, backend=None, producers=None) -> None:
         self.config = config
         self.backend = backend  # gcsd.embed: backend(index) in place of the simulation
+        self.producers = producers  # a telemetry table in place of gcsd.telemetry.producers()
         self.gcs: GCS | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None
@@ -37,7 +38,7 @@ class RunningDaemon:
         async def body():
             self._loop = asyncio.get_running_loop()
             self._stop = asyncio.Event()
-            self.gcs = GCS(self.config, backend=self.backend)
+            self.gcs = GCS(self.config, backend=self.backend, producers=self.producers)
             runner = asyncio.create_task(self.gcs.run(self._stop))
             await self.gcs.ready.wait()
             self._ready.set()
@@ -88,11 +89,11 @@ async def _call(fn):
 def daemon(tmp_path: Path):
     started: list[RunningDaemon] = []
 
-    def start(conf: str | dict, backend=None) -> RunningDaemon:
+    def start(conf: str | dict, backend=None, producers=None) -> RunningDaemon:
         data = yaml.safe_load(conf) if isinstance(conf, str) else dict(conf)
         data.setdefault("state_dir", str(tmp_path / "state"))
         config = parse_config(yaml.safe_dump(data), "test.yaml")
-        d = RunningDaemon(config, backend).start()
+        d = RunningDaemon(config, backend, producers).start()
         started.append(d)
         return d
 

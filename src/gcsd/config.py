@@ -37,7 +37,6 @@ from types import MappingProxyType
 import yaml
 from yaml.nodes import MappingNode, SequenceNode
 
-from .config_logs import read_flight_logs
 from .config_can import read_can
 from .config_companion import (
     COMPANION_KEYS,
@@ -45,6 +44,7 @@ from .config_companion import (
     read_companion,
     read_routing,
 )
+from .config_logs import read_flight_logs
 from .config_mqtt import MQTT_KEYS, read_mqtt
 from .config_reader import Field, Reader, Section, describe, is_null, line_of
 from .config_schema import (  # noqa: F401  the schema, re-exported: `from gcsd.config import Config` works

@@ -2,7 +2,7 @@
 components (one VehicleNode per simulated vehicle) and handles no message itself.
 
 Receive path for every good frame on a channel: the channel has it verified first (the signing
-check, `_verify`; a frame that fails changes nothing but the reject counters, see channel.py),
+check, `verify`; a frame that fails changes nothing but the reject counters, see channel.py),
 then here: drop it if the same bytes came in lately on a link of the same redundant group (or on
 any channel, with routing.dedup_ms; counted `duplicates`), drop it if it is a frame this daemon
 forwarded less than LOOP_WINDOW_S ago (a
@@ -25,34 +25,27 @@ hundred schedulers per pass. `backend` (gcsd.embed) replaces each node's simulat
 from __future__ import annotations
 
 import asyncio
-import functools
 from pathlib import Path
 
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from . import __version__, control
+from . import __version__, compose, control
 from .autopilot.core import DEFAULT_SIM_PERIOD_S
 from .boundary import ErrorCounts
 from .channel import Channel, Peer
 from .clock import Clock
 from .codec import Frame
 from .config import MAX_CHANNELS, Config
-from .config_mqtt import route_capacity
 from .config_schema import ChannelConfig
 from .dedup import LOOP_WINDOW_S, RecentFrames
 from .livechannels import LiveChannels, load_specs
 from .msgids import HEARTBEAT as MSG_ID_HEARTBEAT
 from .msgids import is_radio
 from .node import VehicleNode
-from .router import MAX_ROUTES, Router, RouteTable
-from .services.ftp import FtpService
-from .services.signing import SigningService
 from .signgate import signed_copy
-from .signing import SAVE_INTERVAL_S, SigningManager, SigningStore
-from .tlog import TlogWriter
+from .signing import SAVE_INTERVAL_S
 from .transport import ChannelStartError
-from .vehicles import vehicle_type
 
 log = structlog.get_logger("gcsd.gcs")
 
@@ -62,69 +55,36 @@ IDLE_NODE_PASS_S = 0.5  # a node with nothing scheduled still gets a pass this o
 
 
 class GCS:
-    def __init__(self, config: Config, clock: Clock | None = None, backend=None) -> None:
+    def __init__(self, config: Config, clock: Clock | None = None, backend=None, producers: dict | None = None) -> None:
+        """`backend(index)`: an embedding program's vehicle in place of the simulation (gcsd.embed);
+        `producers`: a telemetry table in place of gcsd.telemetry.producers() (tests)."""
         self.config = config
         self.clock = clock or Clock()
         self.errors = ErrorCounts()
-        now = self.clock.now
-        restored = load_specs(Path(config.state_dir), config.channels)  # channels added at run time
-        self.channels = [Channel(i, c, now) for i, c in enumerate([*config.channels, *(c for _, c in restored)])]
-        self._wakeups = [asyncio.Event() for _ in self.channels]
         self.active: set[int] = set()
         self.opened: set[int] = set()  # channels open at least once
         self._tried: set[int] = set()  # channels opened or, for a client, tried once
         self.ready = asyncio.Event()  # every server channel bound, every client channel tried
-        vtype = vehicle_type(config.vehicle.type)
-        # per channel, when each node next needs a send pass (0: now)
-        self._node_due = [[0.0] * config.vehicle.count for _ in self.channels]
-        self.nodes = [
-            VehicleNode(i, config, vtype, self.clock, self.channels, functools.partial(self._wake_node, i),
-                        backend=None if backend is None else backend(i), errors=self.errors)
-            for i in range(config.vehicle.count)
-        ]
-        for node in self.nodes:  # FTP root: ftp.root under the vehicle's state directory
-            node.add_service(FtpService(node, node.state_dir / config.ftp.root, config.ftp.max_file_bytes))
-        self.signing_manager = SigningManager(
-            config.signing.key, config.signing.require, SigningStore(Path(config.state_dir) / "signing.key"),
-            self.clock.wall(),
-        )
-        if self.signing_manager.load_error:
-            log.error("signing_state_unreadable", error=self.signing_manager.load_error)
-        if self.signing_manager.load_repair:
-            log.warning("signing_timestamp_repaired", reason=self.signing_manager.load_repair)
-        self.signing = self.signing_manager.signing
-        for node in self.nodes:
-            node.add_service(SigningService(node, self.signing_manager))
-        self.tlog = TlogWriter(config.log.tlog) if config.log.tlog else None
-        self.started_s = self.clock.now()
+        self.bad_crc_forwarded = 0
         self._rates: dict[str, tuple[float, float]] = {}
-        self._by_sysid = {n.sysid: n for n in self.nodes}
-        self.router = Router({(n.sysid, n.compid) for n in self.nodes}, [ch.policy for ch in self.channels],
-                             RouteTable(route_capacity((c.type for c in config.channels), MAX_ROUTES)))
         self.loops = RecentFrames(LOOP_WINDOW_S)  # frames forwarded lately: one coming back is a loop
         # routing.dedup_ms: every frame; else the frames of redundant link groups, within LOOP_WINDOW_S
         dedup_ms = config.routing.dedup_ms
         self.dedup = RecentFrames(dedup_ms / 1000 if dedup_ms else LOOP_WINDOW_S)
         self.dedup_all = dedup_ms > 0
-        self.bad_crc_forwarded = 0
-        for ch in self.channels:
-            self._wire(ch)
+        restored = load_specs(Path(config.state_dir), config.channels)  # channels added at run time
+        # channels, signing, tlog, vehicles, router and every callback: the composition root
+        compose.build(self, [*config.channels, *(c for _, c in restored)], backend, producers)
+        self._wakeups = [asyncio.Event() for _ in self.channels]
+        # per channel, when each node next needs a send pass (0: now)
+        self._node_due = [[0.0] * len(self.nodes) for _ in self.channels]
+        if self.signing_manager.load_error:
+            log.error("signing_state_unreadable", error=self.signing_manager.load_error)
+        if self.signing_manager.load_repair:
+            log.warning("signing_timestamp_repaired", reason=self.signing_manager.load_repair)
+        self.started_s = self.clock.now()
+        self._by_sysid = {n.sysid: n for n in self.nodes}
         self.live = LiveChannels(self, restored)
-
-    def _wire(self, ch: Channel) -> None:
-        """Connect a channel to the daemon's receive path, signing, tlog and error boundary."""
-        ch.signing = self.signing
-        ch.wall = self.clock.wall
-        ch.tlog = self.tlog
-        ch.verify = functools.partial(self._verify, ch)
-        ch.on_frame = self.on_frame
-        ch.errors = self.errors
-        ch.on_reject = self._reject
-        ch.on_bad_crc = self.on_bad_crc
-        ch.on_peer_joined = self.on_peer_joined
-        # a tcp-server connection is served before its first good frame unless signatures are
-        # required there (TCP cannot be spoofed: no amplification; see channel.py)
-        ch.serve_on_connect = not (self.config.signing.require and not ch.unsigned_ok)
 
     # --- channels at run time (livechannels.py) ------------------------------------------------
     def free_slot(self, prefer: int | None = None) -> int | None:
@@ -138,8 +98,7 @@ class GCS:
 
     def attach(self, index: int, config: ChannelConfig) -> Channel:
         """A new channel in slot `index`: wired, known to the router and to every vehicle."""
-        ch = Channel(index, config, self.clock.now)
-        self._wire(ch)
+        ch = compose.channel(self, index, config)
         if index == len(self.channels):
             self.channels.append(ch)
             self._wakeups.append(asyncio.Event())
@@ -164,12 +123,12 @@ class GCS:
     def wake(self, channel: Channel) -> None:
         self._wakeups[channel.index].set()
 
-    def _wake_node(self, index: int, channel: Channel) -> None:
+    def wake_node(self, index: int, channel: Channel) -> None:
         self._node_due[channel.index][index] = 0.0
         self._wakeups[channel.index].set()
 
     # --- receive ---------------------------------------------------------------------------
-    def _verify(self, channel: Channel, frame: Frame) -> str | None:
+    def verify(self, channel: Channel, frame: Frame) -> str | None:
         """The signing check, before anything else looks at the frame: None (accepted) or why not."""
         signing = self.signing
         if not signing.checks_needed:
@@ -240,7 +199,7 @@ class GCS:
             return [n for n in self.nodes if n.compid == target_component] or self.nodes
         return self.nodes
 
-    def _reject(self, channel: Channel, frame: Frame, reason: str, now: float) -> None:
+    def reject(self, channel: Channel, frame: Frame, reason: str, now: float) -> None:
         """A frame that failed the signing checks: counted, never learned, forwarded or handled."""
         channel.stats.signature_rejects += 1
         channel.signature_reject_reasons[reason] = channel.signature_reject_reasons.get(reason, 0) + 1
@@ -248,7 +207,7 @@ class GCS:
             log.warning("signature_rejected", channel=channel.name, sysid=frame.sysid, compid=frame.compid,
                         msg=frame.name, reason=reason)
             for node in self.nodes:
-                node.send_text(M.MAV_SEVERITY_WARNING, f"Signing: rejected packet ({reason})", channels={channel.index})
+                node.text(M.MAV_SEVERITY_WARNING, f"Signing: rejected packet ({reason})", channels={channel.index})
 
     def on_peer_joined(self, channel: Channel, peer: Peer) -> None:
         """A new ground station hears from us at once instead of at the next 1 Hz slot."""
@@ -365,7 +324,7 @@ class GCS:
             now = self.clock.now()
             for node in self.nodes:
                 node.step(now)  # guarded inside
-            period = min((n.sim.period_s for n in self.nodes), default=DEFAULT_SIM_PERIOD_S)
+            period = min((n.autopilot.period_s for n in self.nodes), default=DEFAULT_SIM_PERIOD_S)
             await asyncio.sleep(max(0.001, period - (self.clock.now() - now)))
 
     async def _save_signing_timestamp(self) -> None:

@@ -70,14 +70,14 @@ def test_a_raising_command_handler_is_counted_acked_failed_and_shown_by_gcsd_sta
 
 
 def test_a_raise_in_the_signing_check_is_counted_and_the_tcp_connection_lives_on(daemon, client, monkeypatch):
-    original = GCS._verify
+    original = GCS.verify
 
     def verify(self, channel, frame):
         if frame.msgid == PING:
             raise RuntimeError("deliberately broken signing check")
         return original(self, channel, frame)
 
-    monkeypatch.setattr(GCS, "_verify", verify)
+    monkeypatch.setattr(GCS, "verify", verify)
     d = daemon({"channels": [tcp_channel("tcp")]})
     station = client(tcp_url(d.port("tcp")))
     station.heartbeat()

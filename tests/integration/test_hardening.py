@@ -214,14 +214,14 @@ def test_radio_status_does_not_set_a_peers_version(daemon, client):
 
 # --- error boundaries ----------------------------------------------------------------------
 
-def test_a_raising_producer_is_counted_and_everything_else_keeps_streaming(daemon, client, monkeypatch, tmp_path):
+def test_a_raising_producer_is_counted_and_everything_else_keeps_streaming(daemon, client, tmp_path):
     from gcsd import telemetry
 
-    def broken(node, channel, now):
+    def broken(view, channel, now):
         raise RuntimeError("deliberately broken producer")
 
-    monkeypatch.setitem(telemetry.PRODUCERS, M.MAVLINK_MSG_ID_SYS_STATUS, broken)
-    d = daemon({"channels": [udp_channel("gcs")]})
+    producers = {**telemetry.producers(), M.MAVLINK_MSG_ID_SYS_STATUS: broken}
+    d = daemon({"channels": [udp_channel("gcs")]}, producers=producers)
     station = client(udp_url(d.port("gcs")))
     station.heartbeat()
     pump([station], 2.5)

@@ -197,7 +197,7 @@ def test_legacy_mission_item_and_mission_request_work_with_warnings(gcs):
 def test_mission_current_follows_the_plan_and_set_current(gcs):
     d, c = gcs
     changes = []
-    d.gcs.nodes[0].mission.current_changed = lambda seq, reset_jumps: changes.append((seq, reset_jumps))
+    d.gcs.nodes[0].plans.current_changed = lambda seq, reset_jumps: changes.append((seq, reset_jumps))
     assert MissionClient(c).upload(MISSION_PLAN, 0) == ACCEPTED
     mark = c.mark()
     current = wait_for(c, is_type("MISSION_CURRENT", VEHICLE), timeout=3.0, since=mark)

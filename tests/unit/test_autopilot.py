@@ -21,7 +21,7 @@ def wp(h: Harness, north: float, east: float, alt: float = 10.0, command=M.MAV_C
 
 def plan(h: Harness, *items: MissionItem) -> None:
     home = MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 1)
-    h.node.mission.mission.replace((home, *items))
+    h.node.plans.mission.replace((home, *items))
 
 
 def reached(h: Harness) -> list[int]:
@@ -45,7 +45,7 @@ def test_a_mission_reports_each_item_reached_in_order_and_ends_complete(tmp_path
     assert h.mode("AUTO") == ACCEPTED
     assert h.run(200, until=lambda: not h.state.armed)
     assert reached(h) == [1, 2, 3, 4, 5]
-    current = h.node.mission.current_message()
+    current = h.node.plans.current_message()
     assert current.seq == 5 and current.mission_state == M.MISSION_STATE_COMPLETE
     # LAND at 0/0 lands where it is: within WPNAV_RADIUS (2 m) of the last waypoint
     assert distance_m(h.state.lat, h.state.lon, *offset(h.state.home_lat, h.state.home_lon, 0, 20)) < 2.5
@@ -68,7 +68,7 @@ def test_do_items_run_with_their_nav_item_and_conditions_hold_them(tmp_path):
          wp(h, 30, 30))
     h.mode("AUTO")
     h.run(1.0)
-    assert h.node.sim.speed_ms == 2.0
+    assert h.node.autopilot.speed_ms == 2.0
     assert 6 not in h.state.servo_override  # held by the 3 s delay
     h.run(3.0)
     assert h.state.servo_override[6] == 1234
@@ -120,7 +120,7 @@ def test_a_huge_loiter_radius_is_flown_as_the_largest_arducopter_stores(tmp_path
 def test_rtl_goes_to_the_nearest_rally_point_and_lands_there(tmp_path):
     h = flying(tmp_path)
     lat, lon = offset(h.state.home_lat, h.state.home_lon, 40, 0)
-    h.node.mission.rally.replace((MissionItem(M.MAV_CMD_NAV_RALLY_POINT, REL, x=round(lat * 1e7),
+    h.node.plans.rally.replace((MissionItem(M.MAV_CMD_NAV_RALLY_POINT, REL, x=round(lat * 1e7),
                                               y=round(lon * 1e7), z=15),))
     lat2, lon2 = offset(h.state.home_lat, h.state.home_lon, 60, 0)
     h.command_int(M.MAV_CMD_DO_REPOSITION, -1, 0, 0, 0, round(lat2 * 1e7), round(lon2 * 1e7), 10)
@@ -304,7 +304,7 @@ def test_do_jump_tag_continues_the_mission_from_its_tag(tmp_path):
     plan(h, wp(h, 30, 0), MissionItem(M.MAV_CMD_JUMP_TAG, param1=7), wp(h, 0, 10))
     h.mode("AUTO")
     h.run(1.0)
-    assert h.node.mission.current_message().seq == 1
+    assert h.node.plans.current_message().seq == 1
     assert h.command(M.MAV_CMD_DO_JUMP_TAG, 7) == ACCEPTED
     assert h.command(M.MAV_CMD_DO_JUMP_TAG, 8) == FAILED
     assert h.run(60, until=lambda: 3 in reached(h))

@@ -37,8 +37,8 @@ class FakeChannel:
         return 0.25
 
 
-class FakeNode:
-    """What ParamService asks of its node, recorded."""
+class FakeContext:
+    """What ParamService asks of its ServiceContext, recorded."""
 
     def __init__(self, channels: list[FakeChannel]) -> None:
         self.channels = channels
@@ -50,10 +50,10 @@ class FakeNode:
         channel.sent.append(msg)
         return True
 
-    def send_text(self, severity, text, channels=None) -> None:
+    def text(self, severity, text, channels=None) -> None:
         self.texts.append((severity, text, channels))
 
-    def send_banner(self) -> None:
+    def banner(self) -> None:
         self.texts.append((M.MAV_SEVERITY_INFO, "banner", None))
 
     def link(self, channel):
@@ -76,7 +76,7 @@ def defs() -> list[ParamDef]:
 @pytest.fixture
 def svc(tmp_path):
     channels = [FakeChannel(0), FakeChannel(1), FakeChannel(2, private=True)]
-    service = ParamService(FakeNode(channels), ParamStore(defs()), tmp_path / "mav.parm", now=100.0)
+    service = ParamService(FakeContext(channels), ParamStore(defs()), tmp_path / "mav.parm", now=100.0)
     service.dirty_calls = []
     service.on_dirty = lambda: service.dirty_calls.append(True)
     return service
@@ -89,7 +89,7 @@ def incoming(msg, channel, now: float) -> Incoming:
 
 def param_set(svc, name: str, value: float, now: float, channel_index: int = 0) -> None:
     msg = M.MAVLink_param_set_message(1, 1, name.encode(), value, M.MAV_PARAM_TYPE_REAL32)
-    svc.handle_PARAM_SET(incoming(msg, svc.node.channels[channel_index], now))
+    svc.handle_PARAM_SET(incoming(msg, svc.ctx.channels[channel_index], now))
 
 
 def values_of(channel) -> list[tuple[str, float]]:
@@ -101,14 +101,14 @@ def values_of(channel) -> list[tuple[str, float]]:
 
 def test_set_is_confirmed_on_every_non_private_channel_with_the_real_index(svc):
     param_set(svc, "ANGLE_MAX", 4500, now=100.0)
-    ch0, ch1, private = svc.node.channels
+    ch0, ch1, private = svc.ctx.channels
     assert values_of(ch0) == values_of(ch1) == [("ANGLE_MAX", 4500.0)]
     assert [m.param_index for m in ch0.sent] == [svc.store.index_of("ANGLE_MAX")]
     assert private.sent == []
 
 
 def test_read_by_name_and_by_index_answer_on_the_requesting_channel_only(svc):
-    ch0, ch1, _ = svc.node.channels
+    ch0, ch1, _ = svc.ctx.channels
     index = svc.store.index_of("COMPASS_OFS_X")
     svc.handle_PARAM_REQUEST_READ(incoming(M.MAVLink_param_request_read_message(1, 1, b"COMPASS_OFS_X", -1), ch1, 1.0))
     svc.handle_PARAM_REQUEST_READ(incoming(M.MAVLink_param_request_read_message(1, 1, b"", index), ch1, 1.0))
@@ -117,7 +117,7 @@ def test_read_by_name_and_by_index_answer_on_the_requesting_channel_only(svc):
 
 
 def test_unknown_name_or_index_gets_no_reply_while_a_known_one_does(svc):
-    ch0 = svc.node.channels[0]
+    ch0 = svc.ctx.channels[0]
     for msg in (M.MAVLink_param_request_read_message(1, 1, b"NO_SUCH", -1),
                 M.MAVLink_param_request_read_message(1, 1, b"", 60000),
                 M.MAVLink_param_request_read_message(1, 1, b"ANGLE_MAX", -1)):
@@ -127,9 +127,9 @@ def test_unknown_name_or_index_gets_no_reply_while_a_known_one_does(svc):
 
 def test_read_only_write_is_refused_with_text_and_the_old_value_and_nothing_to_persist(svc):
     param_set(svc, "FORMAT_VERSION", 7, now=100.0)
-    ch0, ch1, _ = svc.node.channels
+    ch0, ch1, _ = svc.ctx.channels
     assert values_of(ch0) == [("FORMAT_VERSION", 120.0)] and ch1.sent == []
-    assert svc.node.texts == [(M.MAV_SEVERITY_WARNING, "Param write denied (FORMAT_VERSION)", {0})]
+    assert svc.ctx.texts == [(M.MAV_SEVERITY_WARNING, "Param write denied (FORMAT_VERSION)", {0})]
     assert svc.persist_deadline() is None and svc.dirty_calls == []
 
 
@@ -137,7 +137,7 @@ def test_read_only_write_is_refused_with_text_and_the_old_value_and_nothing_to_p
 def test_nan_and_infinity_change_nothing_and_persist_nothing(svc, value):
     param_set(svc, "COMPASS_OFS_X", value, now=100.0)
     assert svc.store.get("COMPASS_OFS_X") == 0.0
-    assert svc.node.channels[0].sent == [] and svc.persist_deadline() is None
+    assert svc.ctx.channels[0].sent == [] and svc.persist_deadline() is None
 
 
 # --- write-behind deadlines ----------------------------------------------------------------------
@@ -208,12 +208,12 @@ def test_a_failed_write_is_retried_an_interval_later_and_reported_once(svc):
     assert svc.persist_deadline() == 101.0
     svc.take_persist(101.0)
     svc.persist_failed("No space left on device")
-    errors = [t for t in svc.node.texts if t[0] == M.MAV_SEVERITY_ERROR]
+    errors = [t for t in svc.ctx.texts if t[0] == M.MAV_SEVERITY_ERROR]
     assert errors == [(M.MAV_SEVERITY_ERROR, "Param save failed", None)]
     svc.take_persist(102.0)
     svc.persist_done()
     svc.persist_failed("again")
-    assert len([t for t in svc.node.texts if t[0] == M.MAV_SEVERITY_ERROR]) == 2
+    assert len([t for t in svc.ctx.texts if t[0] == M.MAV_SEVERITY_ERROR]) == 2
 
 
 def test_real32_values_are_written_to_read_back_bit_exact(svc):
@@ -223,7 +223,7 @@ def test_real32_values_are_written_to_read_back_bit_exact(svc):
 
 
 def test_without_a_save_path_nothing_is_ever_due(tmp_path):
-    svc = ParamService(FakeNode([FakeChannel(0)]), ParamStore(defs()), None, now=0.0)
+    svc = ParamService(FakeContext([FakeChannel(0)]), ParamStore(defs()), None, now=0.0)
     param_set(svc, "ANGLE_MAX", 4500, now=1.0)
     assert svc.persist_deadline() is None
 
@@ -242,9 +242,9 @@ def request_list(svc, channel, now: float = 1.0) -> None:
 
 
 def test_list_sends_the_banner_slows_telemetry_and_streams_burst_per_pass(svc):
-    ch0 = svc.node.channels[0]
+    ch0 = svc.ctx.channels[0]
     request_list(svc, ch0)
-    assert svc.node.texts[0][1] == "banner" and svc.node.slow == [(0, True)] and svc.node.woken == [0]
+    assert svc.ctx.texts[0][1] == "banner" and svc.ctx.slow == [(0, True)] and svc.ctx.woken == [0]
     sent = []
     now = 1.0
     deadline = svc.pending(ch0, now, lambda m: sent.append(m) or True)
@@ -255,11 +255,11 @@ def test_list_sends_the_banner_slows_telemetry_and_streams_burst_per_pass(svc):
         deadline = svc.pending(ch0, now, lambda m: sent.append(m) or True)
     assert [m.param_index for m in sent] == list(range(len(svc.store)))
     assert now == 1.0 + (len(svc.store) // BURST) * BURST_INTERVAL_S
-    assert svc.node.slow == [(0, True), (0, False)]
+    assert svc.ctx.slow == [(0, True), (0, False)]
 
 
 def test_a_stream_link_has_flow_control_so_its_list_is_not_paced(svc):
-    ch0 = svc.node.channels[0]
+    ch0 = svc.ctx.channels[0]
     ch0.config = SimpleNamespace(type="tcp-server")
     request_list(svc, ch0)
     sent = []
@@ -268,7 +268,7 @@ def test_a_stream_link_has_flow_control_so_its_list_is_not_paced(svc):
 
 
 def test_list_on_a_spent_budget_comes_back_when_the_budget_allows(svc):
-    ch0 = svc.node.channels[0]
+    ch0 = svc.ctx.channels[0]
     ch0.room_bytes = 3 * PARAM_VALUE_BYTES
     request_list(svc, ch0)
     sent = []
@@ -286,7 +286,7 @@ def test_list_on_a_spent_budget_comes_back_when_the_budget_allows(svc):
 
 
 def test_two_requesters_on_one_channel_each_get_every_index(svc):
-    ch0 = svc.node.channels[0]
+    ch0 = svc.ctx.channels[0]
     request_list(svc, ch0)
     frame = SimpleNamespace(sysid=254, compid=190)
     svc.handle_PARAM_REQUEST_LIST(Incoming(M.MAVLink_param_request_list_message(1, 1), frame, ch0, 1.0))

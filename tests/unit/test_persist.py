@@ -9,7 +9,7 @@ import math
 import threading
 import time
 
-from test_params_service import FakeChannel, FakeNode, defs, param_set
+from test_params_service import FakeChannel, FakeContext, defs, param_set
 
 from gcsd.atomic import write_atomic
 from gcsd.params import ParamStore
@@ -36,7 +36,7 @@ class RecordingWrite:
 
 
 def service_and_writer(tmp_path, write: RecordingWrite):
-    svc = ParamService(FakeNode([FakeChannel(0)]), ParamStore(defs()), tmp_path / "mav.parm", now=time.monotonic())
+    svc = ParamService(FakeContext([FakeChannel(0)]), ParamStore(defs()), tmp_path / "mav.parm", now=time.monotonic())
     writer = WriteBehind(svc.save_path, svc, time.monotonic, write=write)
     svc.on_dirty = writer.kick
     return svc, writer
@@ -113,7 +113,7 @@ def test_a_failed_write_is_reported_and_retried_a_second_later(tmp_path):
     asyncio.run(main())
     assert len(write.calls) == 2 and writer.writes == 1
     assert 0.9 <= write.calls[1][0] - write.calls[0][0] < 1.5
-    assert [t[1] for t in svc.node.texts] == ["Param save failed"]
+    assert [t[1] for t in svc.ctx.texts] == ["Param save failed"]
     assert read_parm(tmp_path / "mav.parm")[0]["ANGLE_MAX"] == 4500
 
 

@@ -18,7 +18,7 @@ FAILED, ACCEPTED = M.MAV_RESULT_FAILED, M.MAV_RESULT_ACCEPTED
 def _far_circle(h: Harness) -> None:
     s = h.state
     lat, lon = offset(s.home_lat, s.home_lon, 500.0, 0.0)
-    h.node.mission.fence.replace((MissionItem(M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, M.MAV_FRAME_GLOBAL, param1=50.0,
+    h.node.plans.fence.replace((MissionItem(M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, M.MAV_FRAME_GLOBAL, param1=50.0,
                                               x=round(lat * 1e7), y=round(lon * 1e7)),))
 
 

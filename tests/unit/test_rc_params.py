@@ -260,7 +260,7 @@ def _fly_east(h: Harness) -> float:
     from gcsd.sim.geo import offset
     s = h.state
     lat, lon = offset(s.lat, s.lon, 0.0, 80.0)
-    h.node.sim.goto(lat, lon, s.alt_amsl_m)
+    h.node.autopilot.goto(lat, lon, s.alt_amsl_m)
     h.run(6.0)
     return h.state.heading_deg
 

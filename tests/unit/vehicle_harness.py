@@ -1,7 +1,7 @@
 """A vehicle node with a float clock and one in-memory channel: the unit-test harness.
 
-`Harness(tmp_path, vehicle="copter", config={...})` builds the real VehicleNode (parameters,
-services, autopilot, simulation) from YAML-equivalent configuration, with a Clock whose `now`
+`Harness(tmp_path, vehicle="copter", config={...})` builds the real vehicle node with the
+composition root (parameters, services, autopilot, simulation) from YAML-equivalent configuration, with a Clock whose `now`
 is a float the test advances. Messages from the "ground station" (sysid 255) go in through the
 node's dispatch (`send`, `command`); everything the node sends on the channel is decoded with
 pymavlink and kept (`received`, `texts()`, `last(type)`). `run(seconds)` advances the clock in
@@ -17,8 +17,9 @@ from gcsd.channel import Channel
 from gcsd.clock import Clock
 from gcsd.codec import Frame
 from gcsd.config import parse_config
-from gcsd.node import VehicleNode
-from gcsd.vehicles import vehicle_type
+from gcsd.boundary import ErrorCounts
+from gcsd.compose import build_vehicle
+from gcsd.signing import SigningManager
 
 GCS = (255, 190)
 
@@ -40,8 +41,8 @@ class Harness:
         self._parser = M.MAVLink(None)
         self._parser.robust_parsing = True
         self.channel.add_peer("gcs", self._write)
-        self.node = VehicleNode(0, self.config, vehicle_type(vehicle), self.clock, [self.channel],
-                                lambda ch: None, backend=backend)
+        self.node = build_vehicle(0, self.config, self.clock, [self.channel], lambda ch: None, ErrorCounts(),
+                                  SigningManager(None, False, None, self.clock.wall()), backend=backend)
         self._out = M.MAVLink(None, srcSystem=GCS[0], srcComponent=GCS[1])
 
     def _write(self, data: bytes) -> bool:

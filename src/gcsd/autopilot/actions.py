@@ -121,7 +121,7 @@ class Actions:
     # --- missions -------------------------------------------------------------------------------
     def start_mission(self, first: int) -> bool:
         self.sync()
-        store = self.node.mission.mission
+        store = self.ctx.plans.mission
         if store.count() <= 1 or not self.state.armed:
             return False
         if first > 0 and not store.set_current(first):
@@ -182,7 +182,7 @@ class Actions:
         wanted = self.settings.track_sysid
         if not location_ok(lat, lon, alt):
             return
-        if sysid != self.node.sysid and (wanted == 0 or wanted == sysid):
+        if sysid != self.ctx.sysid and (wanted == 0 or wanted == sysid):
             self.tracked = (lat, lon, alt)
 
     # --- home ------------------------------------------------------------------------------------
@@ -193,10 +193,9 @@ class Actions:
         s.home_lat, s.home_lon, s.home_alt_m = lat, lon, alt
         s.has_home = True
         self.home_locked = self.home_locked or locked
-        self.node.mission.home_changed()
-        for link in self.node.links:
-            link.push(M.MAVLINK_MSG_ID_HOME_POSITION)
-            link.push(M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
+        self.ctx.plans.home_changed()
+        self.ctx.push(M.MAVLINK_MSG_ID_HOME_POSITION)
+        self.ctx.push(M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
         return True
 
     # --- sticks ----------------------------------------------------------------------------------
@@ -218,13 +217,13 @@ class Actions:
         if s.rc_override and since is not None and hold_s >= 0 and now - since > hold_s:
             s.rc_override.clear()
         mode = self.rc.mode_switch(self.params, s.rc_override, now)
-        control = getattr(self.node, "control", None)
-        if mode is not None and control is not None:
+        control = self.ctx.control
+        if mode is not None:
             control.set_mode(mode)  # refused with a STATUSTEXT, as a ground station's request
         gesture = self.rc.rudder_arming(self.params, s.rc_override, now, s.armed)
-        if gesture == "arm" and control is not None:
+        if gesture == "arm":
             control.arm_by_rudder()
-        elif gesture == "disarm" and s.on_ground and control is not None:
+        elif gesture == "disarm" and s.on_ground:
             control.disarm_by_rudder()
 
     def sticks(self, now: float) -> tuple[float, float, float, float]:
@@ -234,25 +233,24 @@ class Actions:
 
     # --- the mission runner's view -----------------------------------------------------------
     def mission_items(self):
-        return self.node.mission.mission.stored()
+        return self.ctx.plans.mission.stored()
 
     def current_seq(self) -> int:
-        return self.node.mission.mission.current_seq
+        return self.ctx.plans.mission.current_seq
 
     def set_current(self, seq: int) -> None:
-        store = self.node.mission.mission
+        store = self.ctx.plans.mission
         if store.current_seq != seq and store.set_current(seq):
-            for link in self.node.links:
-                link.push(M.MAVLINK_MSG_ID_MISSION_CURRENT)
+            self.ctx.push(M.MAVLINK_MSG_ID_MISSION_CURRENT)
 
     def reached(self, seq: int) -> None:
-        self.node.mission.item_reached(seq)
+        self.ctx.plans.item_reached(seq)
 
     def rally_items(self):
-        return self.node.mission.rally.stored()
+        return self.ctx.plans.rally.stored()
 
     def _fence_items(self):
-        return self.node.mission.fence.stored()
+        return self.ctx.plans.fence.stored()
 
     def accept_radius_m(self) -> float:
         return self.settings.accept_radius_m or self.limits.wp_radius_m

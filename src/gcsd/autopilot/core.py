@@ -49,14 +49,14 @@ TAKEOFF_TOLERANCE_M = 1.0
 
 
 class Autopilot(Actions):
-    def __init__(self, node, backend=None, now: float = 0.0, speedup: float = 1.0) -> None:
-        self.node = node
-        self.state = node.state
-        self.vehicle = node.vehicle
-        self.params = node.params
+    def __init__(self, ctx, backend=None, now: float = 0.0, speedup: float = 1.0) -> None:
+        self.ctx = ctx
+        self.state = ctx.state
+        self.vehicle = ctx.vehicle
+        self.params = ctx.params
         self.simulated = backend is None
-        if backend is None and node.vehicle.dynamics is not None:
-            backend = SimulatedVehicle(node.vehicle.dynamics(), environment(node.params.get))
+        if backend is None and ctx.vehicle.dynamics is not None:
+            backend = SimulatedVehicle(ctx.vehicle.dynamics(), environment(ctx.params.get))
         self.backend = backend
         self.speedup = float(self.params.get("SIM_SPEEDUP")) if "SIM_SPEEDUP" in self.params else speedup
         self.period_s = 1.0 / float(self.params.get("SIM_RATE_HZ")) if "SIM_RATE_HZ" in self.params else DEFAULT_SIM_PERIOD_S
@@ -141,11 +141,10 @@ class Autopilot(Actions):
             self._reload()
         self.sync()
         self.rc_tick(now)
-        control = getattr(self.node, "control", None)
-        last_seen = control.gcs_last_seen_s if control is not None else None
+        last_seen = self.ctx.control.gcs_last_seen_s
         for event in self.failsafes.check(s, self.settings, self.params, last_seen, now, self._fence_items(),
                                           self._sim_ms, rc_lost=self.rc.lost(self.params, s.rc_override)):
-            self.node.send_text(event.severity, event.text)
+            self.ctx.text(event.severity, event.text)
             if event.action is not None:
                 self.act(event.action, f"{event.text}")
         sp = self.paused or self._setpoints[self.behaviour](s, dt, now)
@@ -178,7 +177,7 @@ class Autopilot(Actions):
         needs_position = behaviour in (B.GUIDED, B.AUTO, B.RTL, B.CIRCLE, B.TRACK)
         if needs_position and self.state.gps_fix_type < 3:
             return "requires position"
-        if behaviour == B.AUTO and self.node.mission.mission.count() <= 1:
+        if behaviour == B.AUTO and self.ctx.plans.mission.count() <= 1:
             return "no mission"
         return None
 
@@ -188,7 +187,7 @@ class Autopilot(Actions):
             return False
         if self.state.mode != number:
             self.state.mode = number
-            self.node.push_heartbeat()
+            self.ctx.push(M.MAVLINK_MSG_ID_HEARTBEAT)
         return True
 
     def act(self, action: str, reason: str) -> None:
@@ -208,9 +207,9 @@ class Autopilot(Actions):
         self._touchdown_s = None
         self.hold = self._here(Kind.HOLD if not s.on_ground else Kind.IDLE)
         if self.behaviour == B.AUTO:
-            restart = self.runner.complete or self.node.mission.complete
+            restart = self.runner.complete or self.ctx.plans.complete
             if restart:
-                self.node.mission.mission.set_current(1)
+                self.ctx.plans.mission.set_current(1)
             self.runner.start(restart=restart)
             self._mission_ended = False
         elif self.behaviour == B.RTL:
@@ -309,7 +308,7 @@ class Autopilot(Actions):
         if sp.kind == Kind.LAND and self.landed_after_landing():
             if self._touchdown_s is None:
                 self._touchdown_s = s.time_s
-                self.node.send_text(M.MAV_SEVERITY_INFO, "Landed")
+                self.ctx.text(M.MAV_SEVERITY_INFO, "Landed")
             if s.time_s - self._touchdown_s >= self.settings.land_disarm_delay_s:
                 if self.behaviour == B.AUTO:
                     self.runner.tick(s, 0.0)  # the mission's LAND item completes before the disarm
@@ -362,9 +361,9 @@ class Autopilot(Actions):
         s.armed = False
         self._armed = False
         self._on_arming(False)
-        self.node.send_text(M.MAV_SEVERITY_INFO, "Disarming motors")
-        self.node.push_heartbeat()
-        log.info("vehicle_disarmed", sysid=self.node.sysid, reason=reason)
+        self.ctx.text(M.MAV_SEVERITY_INFO, "Disarming motors")
+        self.ctx.push(M.MAVLINK_MSG_ID_HEARTBEAT)
+        log.info("vehicle_disarmed", sysid=self.ctx.sysid, reason=reason)
 
     def reboot(self) -> None:
         """A simulated reboot: disarmed, initial mode, mission from the start, everything reset."""
@@ -379,12 +378,12 @@ class Autopilot(Actions):
         self.rc = RcInput()
         self.outputs = Outputs(s, self.params)
         self.runner = MissionRunner(self)
-        self.node.mission.mission.set_current(0)
+        self.ctx.plans.mission.set_current(0)
         self.speed_override = self.roi = self.yaw_target = self.paused = None
         self.home_locked = False
         self.reversed = False
         self._enter(s.mode)
-        self.node.push_heartbeat()
+        self.ctx.push(M.MAVLINK_MSG_ID_HEARTBEAT)
 
     def backend_prearm_failures(self) -> list[str]:
         check = getattr(self.backend, "prearm_failures", None)

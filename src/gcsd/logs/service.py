@@ -87,7 +87,7 @@ class FlightLogService(Service):
             self.counters_.refused_armed += 1
             if not self._warned_armed:
                 self._warned_armed = True
-                self.node.send_text(M.MAV_SEVERITY_ERROR, "Disarm for log download", {inc.channel.index})
+                self.node.text(M.MAV_SEVERITY_ERROR, "Disarm for log download", {inc.channel.index})
             return None
         self._warned_armed = False
         key = (inc.channel.index, *inc.sender)

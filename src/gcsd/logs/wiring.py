@@ -29,5 +29,5 @@ def flight_log_service(node, config) -> FlightLogService:
         names = set(fl.channels)
         channels = frozenset(i for i, c in enumerate(config.channels) if c.name in names) if names else None
         capture = Capture(node.sysid, node.compid, channels)
-    simulated = fl.simulated and node.sim.simulated and node.vehicle.can_arm
+    simulated = fl.simulated and node.autopilot.simulated and node.vehicle.can_arm
     return FlightLogService(node, store, simulated, capture)

@@ -73,8 +73,8 @@ def _scale_e7(v: float) -> float:
 class CommandService(Service):
     capabilities = M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
 
-    def __init__(self, node, table: dict[int, Callable[[CommandRequest], int]]) -> None:
-        self.node = node
+    def __init__(self, ctx, table: dict[int, Callable[[CommandRequest], int]]) -> None:
+        self.ctx = ctx
         self.table = table
         self.unsupported = 0
         self.refused = 0  # commands refused by the edge check
@@ -111,7 +111,7 @@ class CommandService(Service):
         compid = req.inc.frame.target_component
         table = self.components.get(compid)
         if table is None:
-            table, compid = self.table, self.node.compid
+            table, compid = self.table, self.ctx.compid
         handler = table.get(req.command)
         if handler is None:
             self.unsupported += 1
@@ -125,7 +125,7 @@ class CommandService(Service):
         p1, p2, p3, p4, x, y, z = checked
         req = replace(req, params=(p1, p2, p3, p4), x=x, y=y, z=z)
         result = M.MAV_RESULT_FAILED  # what the ground station hears if the handler raises
-        with self.node.errors.guard(f"command:{req.command}", req.inc.now, channel=req.inc.channel.name,
+        with self.ctx.errors.guard(f"command:{req.command}", req.inc.now, channel=req.inc.channel.name,
                                     sysid=req.inc.frame.sysid):
             result = handler(req)
         self._ack(req.inc, req.command, result, compid)
@@ -133,7 +133,7 @@ class CommandService(Service):
     def _ack(self, inc: Incoming, command: int, result: int, from_compid: int | None = None) -> None:
         sysid, compid = inc.sender
         ack = M.MAVLink_command_ack_message(command, result, 0, 0, sysid, compid)
-        if from_compid is None or from_compid == self.node.compid:
-            self.node.reply(inc.channel, ack)
+        if from_compid is None or from_compid == self.ctx.compid:
+            self.ctx.reply(inc.channel, ack)
         else:
-            inc.channel.send_message(ack, self.node.sysid, from_compid)
+            inc.channel.send_message(ack, self.ctx.sysid, from_compid)

@@ -21,8 +21,8 @@ FORCE_MAGIC = (21196, 2989)
 
 
 class ControlService(Service):
-    def __init__(self, node) -> None:
-        self.node = node
+    def __init__(self, ctx) -> None:
+        self.ctx = ctx
         self.gcs_last_seen_s: float | None = None
 
     def commands(self):
@@ -34,62 +34,62 @@ class ControlService(Service):
         }
 
     def handle_HEARTBEAT(self, inc: Incoming) -> None:
-        if inc.frame.sysid == self.node.gcs_sysid:
+        if inc.frame.sysid == self.ctx.gcs_sysid:
             self.gcs_last_seen_s = inc.now
 
     def handle_SET_MODE(self, inc: Incoming) -> None:
         m = inc.msg
-        if m.target_system == self.node.sysid and m.base_mode & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+        if m.target_system == self.ctx.sysid and m.base_mode & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             self._set_mode(m.custom_mode)
 
     # --- commands --------------------------------------------------------------------------
     def arm_disarm(self, req: CommandRequest) -> int:
         forced = math.isfinite(req.param2) and int(req.param2) in FORCE_MAGIC  # NaN: not forced
         if req.param1 == 1:
-            return self._arm(forced)
+            return self.arm(forced)
         if req.param1 == 0:
             return self._disarm(forced)
         return UNSUPPORTED
 
     def arm_by_rudder(self) -> bool:
         """ARMING_RUDDER's gesture (gcsd.vehicles.rc): arming with the same checks as a command."""
-        return self._arm(False) == ACCEPTED
+        return self.arm(False) == ACCEPTED
 
     def disarm_by_rudder(self) -> bool:
         return self._disarm(False) == ACCEPTED
 
-    def _arm(self, forced: bool) -> int:
-        node = self.node
-        state = node.state
+    def arm(self, forced: bool = False) -> int:
+        ctx = self.ctx
+        state = ctx.state
         if state.armed:
             return ACCEPTED
-        if not node.vehicle.can_arm:
+        if not ctx.vehicle.can_arm:
             return UNSUPPORTED  # a companion computer: arming is the flight controller's business
         if not forced:
-            failures = node.prearm_failures()
+            failures = ctx.prearm_failures()
             if failures:
                 for text in failures:
-                    node.send_text(M.MAV_SEVERITY_CRITICAL, f"PreArm: {text}")
+                    ctx.text(M.MAV_SEVERITY_CRITICAL, f"PreArm: {text}")
                 return FAILED
-            if not node.vehicle.can_arm_in(state.mode):
-                node.send_text(M.MAV_SEVERITY_CRITICAL, "Arm: Mode not armable")
+            if not ctx.vehicle.can_arm_in(state.mode):
+                ctx.text(M.MAV_SEVERITY_CRITICAL, "Arm: Mode not armable")
                 return FAILED
         state.armed = True
-        node.send_text(M.MAV_SEVERITY_INFO, "Arming motors")
-        node.push_heartbeat()
+        ctx.text(M.MAV_SEVERITY_INFO, "Arming motors")
+        ctx.push(M.MAVLINK_MSG_ID_HEARTBEAT)
         return ACCEPTED
 
     def _disarm(self, forced: bool) -> int:
-        node = self.node
-        state = node.state
+        ctx = self.ctx
+        state = ctx.state
         if not state.armed:
             return ACCEPTED
         if not forced and state.relative_alt_m > 0.5:
-            node.send_text(M.MAV_SEVERITY_CRITICAL, "Disarm: vehicle is flying; use force to disarm")
+            ctx.text(M.MAV_SEVERITY_CRITICAL, "Disarm: vehicle is flying; use force to disarm")
             return FAILED
         state.armed = False
-        node.send_text(M.MAV_SEVERITY_INFO, "Disarming motors")
-        node.push_heartbeat()
+        ctx.text(M.MAV_SEVERITY_INFO, "Disarming motors")
+        ctx.push(M.MAVLINK_MSG_ID_HEARTBEAT)
         return ACCEPTED
 
     def do_set_mode(self, req: CommandRequest) -> int:
@@ -102,27 +102,27 @@ class ControlService(Service):
         return self._set_mode(number)
 
     def _set_mode(self, number: int) -> bool:
-        node = self.node
-        if number not in node.vehicle.modes:
-            node.send_text(M.MAV_SEVERITY_WARNING, f"Mode change to {number} failed: unknown mode")
+        ctx = self.ctx
+        if number not in ctx.vehicle.modes:
+            ctx.text(M.MAV_SEVERITY_WARNING, f"Mode change to {number} failed: unknown mode")
             return False
-        refusal = node.sim.refuse_mode(number)  # the vehicle's own conditions (position, a mission...)
+        refusal = ctx.autopilot.refuse_mode(number)  # the vehicle's own conditions (position, a mission...)
         if refusal is not None:
-            node.send_text(M.MAV_SEVERITY_WARNING, f"Mode change to {node.vehicle.mode_name(number)} failed: {refusal}")
+            ctx.text(M.MAV_SEVERITY_WARNING, f"Mode change to {ctx.vehicle.mode_name(number)} failed: {refusal}")
             return False
-        if node.state.mode != number:
-            node.state.mode = number
-            node.push_heartbeat()
+        if ctx.state.mode != number:
+            ctx.state.mode = number
+            ctx.push(M.MAVLINK_MSG_ID_HEARTBEAT)
         return True
 
     def get_home_position(self, req: CommandRequest) -> int:
-        if not self.node.state.has_home:
+        if not self.ctx.state.has_home:
             return FAILED
-        link = self.node.link(req.inc.channel)
+        link = self.ctx.link(req.inc.channel)
         link.push(M.MAVLINK_MSG_ID_HOME_POSITION)
         link.push(M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
         return ACCEPTED
 
     def send_banner(self, req: CommandRequest) -> int:
-        self.node.send_banner()
+        self.ctx.banner()
         return ACCEPTED

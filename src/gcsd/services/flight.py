@@ -65,14 +65,14 @@ def _result(ok: bool) -> int:
 
 
 class FlightService(Service):
-    def __init__(self, node) -> None:
-        self.node = node
-        self.ap = node.sim
-        node.mission.guided_handler = self.ap.guided_mission_item
+    def __init__(self, ctx, plans) -> None:
+        self.ctx = ctx
+        self.ap = ctx.autopilot
+        plans.guided_handler = self.ap.guided_mission_item  # MISSION_ITEM with current=2
 
     def message_handlers(self):
         handlers = super().message_handlers()
-        if Behaviour.TRACK not in set(self.node.vehicle.behaviours.values()):
+        if Behaviour.TRACK not in set(self.ctx.vehicle.behaviours.values()):
             handlers.pop("GLOBAL_POSITION_INT", None)  # only an antenna tracker follows other vehicles
         return handlers
 
@@ -89,16 +89,16 @@ class FlightService(Service):
             M.MAV_CMD_DO_REPEAT_RELAY: self.repeat_relay, M.MAV_CMD_DO_FLIGHTTERMINATION: self.terminate,
             M.MAV_CMD_DO_JUMP_TAG: self.jump_tag,
         }
-        if "FENCE_ENABLE" in self.node.params:
+        if "FENCE_ENABLE" in self.ctx.params:
             table[M.MAV_CMD_DO_FENCE_ENABLE] = self.fence_enable
         return table
 
     # --- modes by command ------------------------------------------------------------------
     def _mode(self, name: str) -> int:
-        number = self.node.vehicle.mode_number(name)
+        number = self.ctx.vehicle.mode_number(name)
         if number is None:
             return UNSUPPORTED
-        return _result(self.node.control.set_mode(number))
+        return _result(self.ctx.control.set_mode(number))
 
     def rtl(self, req: CommandRequest) -> int:
         return self._mode("RTL")
@@ -111,7 +111,7 @@ class FlightService(Service):
 
     def jump_tag(self, req: CommandRequest) -> int:
         """DO_JUMP_TAG: the mission continues from its JUMP_TAG item with this tag (param1)."""
-        store = self.node.mission.mission
+        store = self.ctx.plans.mission
         for seq, item in enumerate(store.stored()):
             if item.command == M.MAV_CMD_JUMP_TAG and item.param1 == req.param1 and seq > 0:
                 self.ap.set_current(seq)
@@ -123,18 +123,18 @@ class FlightService(Service):
 
     # --- guided ----------------------------------------------------------------------------
     def _alt(self, z: float, frame: int) -> float:
-        s = self.node.state
+        s = self.ctx.state
         return s.home_alt_m + z if frame in RELATIVE_FRAMES else z
 
     def reposition(self, req: CommandRequest) -> int:
         if not self.ap.in_guided():
             if not int(req.param2) & M.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE:
                 return DENIED
-            number = self.node.vehicle.mode_number("GUIDED")
-            if number is None or not self.node.control.set_mode(number):
+            number = self.ctx.vehicle.mode_number("GUIDED")
+            if number is None or not self.ctx.control.set_mode(number):
                 return FAILED
-            self.ap._enter(self.node.state.mode)
-        s = self.node.state
+            self.ap._enter(self.ctx.state.mode)
+        s = self.ctx.state
         lat, lon = (req.x / 1e7, req.y / 1e7) if (req.x or req.y) else (s.lat, s.lon)
         alt = self._alt(req.z, req.frame)  # finite: the edge check refuses a NaN altitude (ArduPilot: DENIED)
         speed = req.param1 if req.param1 > 0 else None
@@ -149,7 +149,7 @@ class FlightService(Service):
 
     def set_home(self, req: CommandRequest) -> int:
         """param1 1, or latitude and longitude 0: here (ArduPilot); else the location given."""
-        s = self.node.state
+        s = self.ctx.state
         if req.param1 >= 1 or not (req.x or req.y):
             return _result(self.ap.set_home(s.lat, s.lon, s.alt_amsl_m))
         return _result(self.ap.set_home(req.x / 1e7, req.y / 1e7, self._alt(req.z, req.frame)))
@@ -187,7 +187,7 @@ class FlightService(Service):
     def fence_enable(self, req: CommandRequest) -> int:
         if req.param1 not in (0, 1, 2):
             return FAILED
-        self.node.params.set("FENCE_ENABLE", 1 if req.param1 == 1 else 0, force=True)
+        self.ctx.params.set("FENCE_ENABLE", 1 if req.param1 == 1 else 0, force=True)
         return ACCEPTED
 
     def terminate(self, req: CommandRequest) -> int:
@@ -197,7 +197,7 @@ class FlightService(Service):
 
     # --- messages --------------------------------------------------------------------------
     def _for_us(self, inc: Incoming) -> bool:
-        return inc.msg.target_system == self.node.sysid
+        return inc.msg.target_system == self.ctx.sysid
 
     def handle_SET_POSITION_TARGET_GLOBAL_INT(self, inc: Incoming) -> None:
         m = inc.msg
@@ -213,7 +213,7 @@ class FlightService(Service):
         m = inc.msg
         if not self._for_us(inc) or m.coordinate_frame not in LOCAL_TARGET_FRAMES or not _target_ok(m, LOCAL_FIELDS):
             return
-        s = self.node.state
+        s = self.ctx.state
         yaw = None if m.type_mask & YAW_IGNORED else math.degrees(m.yaw)
         body = m.coordinate_frame in (M.MAV_FRAME_BODY_NED, M.MAV_FRAME_BODY_OFFSET_NED, M.MAV_FRAME_BODY_FRD)
         c, sn = math.cos(s.yaw_rad), math.sin(s.yaw_rad)
@@ -232,7 +232,7 @@ class FlightService(Service):
             self.ap.velocity(vn, ve, m.vz, yaw, inc.now)
 
     def _from_gcs(self, inc: Incoming) -> bool:
-        return inc.frame.sysid == self.node.gcs_sysid and inc.msg.target_system == self.node.sysid
+        return inc.frame.sysid == self.ctx.gcs_sysid and inc.msg.target_system == self.ctx.sysid
 
     def handle_RC_CHANNELS_OVERRIDE(self, inc: Incoming) -> None:
         if not self._from_gcs(inc):
@@ -247,17 +247,17 @@ class FlightService(Service):
         self.ap.rc_override(values, inc.now)
 
     def handle_MANUAL_CONTROL(self, inc: Incoming) -> None:
-        if inc.frame.sysid != self.node.gcs_sysid or inc.msg.target != self.node.sysid:
+        if inc.frame.sysid != self.ctx.gcs_sysid or inc.msg.target != self.ctx.sysid:
             return
         m = inc.msg
-        get = self.node.params.get
+        get = self.ctx.params.get
 
         def pwm(n: int, value: float) -> int:  # value in -1..1 around RCn_TRIM
             trim = get(f"RC{n}_TRIM")
             span = (get(f"RC{n}_MAX") - trim) if value >= 0 else (trim - get(f"RC{n}_MIN"))
             return int(trim + max(-1.0, min(1.0, value)) * span)
 
-        roll, pitch, throttle, yaw = (mapped_channel(self.node.params, i) for i in range(4))  # RCMAP_*
+        roll, pitch, throttle, yaw = (mapped_channel(self.ctx.params, i) for i in range(4))  # RCMAP_*
         throttle_min, throttle_max = get(f"RC{throttle}_MIN"), get(f"RC{throttle}_MAX")
         values = {roll: pwm(roll, m.y / 1000.0), pitch: pwm(pitch, -m.x / 1000.0),
                   throttle: int(throttle_min + max(0, min(1000, m.z)) / 1000.0 * (throttle_max - throttle_min)),

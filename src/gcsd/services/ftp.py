@@ -39,36 +39,40 @@ SLOW_S = 1.0
 BURST_BANDWIDTH_SHARE = 3  # a burst uses at most 1/3 of a link's configured bandwidth
 
 
-class NodeParams:
-    """The node's parameter store and service, as the FTP virtual files want them."""
+class VehicleParams:
+    """The vehicle's parameter store and service, as the FTP virtual files want them."""
 
-    def __init__(self, node) -> None:
-        self.node = node
+    def __init__(self, ctx, param_service) -> None:
+        self.ctx = ctx
+        self.param_service = param_service
 
     def entries(self):
-        return self.node.params.entries()
+        return self.ctx.params.entries()
 
     def count(self) -> int:
-        return len(self.node.params)
+        return len(self.ctx.params)
 
     def set_from_file(self, name: str, value: float) -> bool:
-        return self.node.param_service.set_from_file(name, value, save=False)
+        return self.param_service.set_from_file(name, value, save=False)
 
     def commit(self) -> None:
-        self.node.param_service.save()
+        self.ctx.save_params()
 
     def downloaded(self) -> None:
-        self.node.send_banner()
+        self.ctx.banner()
 
 
 class FtpService(Service):
     capabilities = M.MAV_PROTOCOL_CAPABILITY_FTP
 
-    def __init__(self, node, root: Path, max_file_bytes: int, mounts: dict[str, Path] | None = None) -> None:
-        self.node = node
-        params = NodeParams(node) if getattr(node, "params", None) is not None else None
-        plans = getattr(node, "mission", None)  # the mission service: read_plan / write_plan
-        missions = MissionFiles(plans) if hasattr(plans, "read_plan") else None
+    def __init__(self, ctx, root: Path, max_file_bytes: int, param_service=None, plans=None,
+                 mounts: dict[str, Path] | None = None) -> None:
+        """`param_service` serves @PARAM/param.pck, `plans` (the mission service: read_plan /
+        write_plan) the @MISSION files; without them those virtual files do not exist. `mounts`: directories kept
+        elsewhere (the flight logs as `logs/`)."""
+        self.ctx = ctx
+        params = VehicleParams(ctx, param_service) if param_service is not None else None
+        missions = MissionFiles(plans) if plans is not None else None
         self.server = FtpServer(ConfinedFs(root, max_file_bytes, mounts), VirtualFiles(params, missions))
         self._outbox: dict[int, deque[Outgoing]] = {}
         self._slow_until_s: dict[int, float] = {}
@@ -88,9 +92,9 @@ class FtpService(Service):
                 box.popleft()
                 self.replies_dropped += 1
             box.append(reply)
-        self._flush(channel, inc.now, lambda msg: self.node.reply(channel, msg))
+        self._flush(channel, inc.now, lambda msg: self.ctx.reply(channel, msg))
         if box or self.server.has_work(channel.index):
-            self.node.wake(channel)
+            self.ctx.wake(channel)
 
     def pending(self, channel, now: float, send) -> float | None:
         """The send-pass hook: outbox, then bursts and CRCs; returns this service's next deadline."""
@@ -107,7 +111,7 @@ class FtpService(Service):
         until = self._slow_until_s.get(index)
         if until is not None and now >= until:
             del self._slow_until_s[index]
-            self.node.link(channel).set_slow("ftp", False)
+            self.ctx.link(channel).set_slow("ftp", False)
         elif until is not None:
             deadline = until if deadline is None else min(deadline, until)
         return deadline
@@ -151,6 +155,6 @@ class FtpService(Service):
         if not send(msg):
             return False
         if channel.index not in self._slow_until_s:
-            self.node.link(channel).set_slow("ftp", True)
+            self.ctx.link(channel).set_slow("ftp", True)
         self._slow_until_s[channel.index] = now + SLOW_S
         return True

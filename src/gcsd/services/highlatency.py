@@ -16,8 +16,8 @@ from .commands import CommandRequest
 
 
 class HighLatencyService(Service):
-    def __init__(self, node) -> None:
-        self.node = node
+    def __init__(self, ctx) -> None:
+        self.ctx = ctx
 
     def commands(self):
         return {M.MAV_CMD_CONTROL_HIGH_LATENCY: self.control_high_latency}
@@ -25,8 +25,8 @@ class HighLatencyService(Service):
     def control_high_latency(self, req: CommandRequest) -> int:
         if req.param1 not in (0, 1):
             return M.MAV_RESULT_FAILED
-        for channel in self.node.channels:
+        for channel in self.ctx.channels:
             if "high_latency" in channel.config.options:
                 channel.output_enabled = req.param1 == 1
-                self.node.wake(channel)
+                self.ctx.wake(channel)
         return M.MAV_RESULT_ACCEPTED

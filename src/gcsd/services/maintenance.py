@@ -66,13 +66,13 @@ FORMAT_S = 1.0
 class MaintenanceService(Service):
     capabilities = M.MAV_PROTOCOL_CAPABILITY_COMPASS_CALIBRATION  # DO_START_MAG_CAL and its reports
 
-    def __init__(self, node, ftp_root: Path | None = None) -> None:
-        self.node = node
+    def __init__(self, ctx, ftp_root: Path | None = None) -> None:
+        self.ctx = ctx
         self.ftp_root = ftp_root
         self.slot = LongRunning()
-        self.accel = AccelCal(node.params)
+        self.accel = AccelCal(ctx.params)
         self.accel_requester: tuple | None = None  # ((sysid, compid), channel) of the accel dialogue
-        self.mag = MagCal(node.params)
+        self.mag = MagCal(ctx.params)
         self.mag_outbox: dict[int, list] = {}  # channel index -> MAG_CAL messages for it
         self.prearm_display = PrearmDisplay()
 
@@ -87,7 +87,7 @@ class MaintenanceService(Service):
 
     # --- calibration -------------------------------------------------------------------------
     def calibration(self, req: CommandRequest) -> int:
-        if self.node.state.armed:
+        if self.ctx.state.armed:
             return LATER
         p = [round(v) if math.isfinite(v) else 0 for v in (req.param1, req.param2, req.param3, req.param4, req.x, req.y)]
         if not any(p) and self.accel.running():  # QGroundControl's Cancel
@@ -97,8 +97,8 @@ class MaintenanceService(Service):
             if self.accel.running() or self.slot.job is not None:
                 return LATER
             self.accel_requester = (req.inc.sender, req.inc.channel)
-            self.accel.start(req.inc.now, (self.node.state.roll_rad, self.node.state.pitch_rad))
-            self.node.wake(req.inc.channel)
+            self.accel.start(req.inc.now, (self.ctx.state.roll_rad, self.ctx.state.pitch_rad))
+            self.ctx.wake(req.inc.channel)
             return ACCEPTED
         steps = []
         if p[0] == 1:
@@ -111,14 +111,14 @@ class MaintenanceService(Service):
             steps.append(self._simple_accel)
         if p[5] == 2:
             steps.append(self._airspeed)
-        if p[3] == 1 and not any(p[:3]) and not any(p[4:]) and self.node.vehicle.radio_trim_sticks:
+        if p[3] == 1 and not any(p[:3]) and not any(p[4:]) and self.ctx.vehicle.radio_trim_sticks:
             return self._trim_radio()
         interactive = p[0] == 3 or p[1] == 1 or p[3] == 1 or p[5] == 1
         if not steps or interactive:
             return UNSUPPORTED
         if self.accel.running():
             return LATER
-        self.node.send_text(M.MAV_SEVERITY_INFO, "Calibrating sensors")
+        self.ctx.text(M.MAV_SEVERITY_INFO, "Calibrating sensors")
 
         def finish() -> int:
             for step in steps:
@@ -134,20 +134,20 @@ class MaintenanceService(Service):
                 continue
             for axis in "XYZ":
                 self._set(f"{prefix}OFFS_{axis}", self._param(f"SIM_GYR{imu}_BIAS_{axis}", 0.0))
-        self.node.send_text(M.MAV_SEVERITY_INFO, "Gyro calibration complete")
+        self.ctx.text(M.MAV_SEVERITY_INFO, "Gyro calibration complete")
 
     def _baro(self) -> None:
-        pressure_pa = _pressure_pa(self.node.state.alt_amsl_m)
+        pressure_pa = _pressure_pa(self.ctx.state.alt_amsl_m)
         for n in (1, 2, 3):
             self._set(f"BARO{n}_GND_PRESS", pressure_pa)
-        self.node.send_text(M.MAV_SEVERITY_INFO, "Updating barometer calibration")
-        self.node.send_text(M.MAV_SEVERITY_INFO, "Barometer calibration complete")
+        self.ctx.text(M.MAV_SEVERITY_INFO, "Updating barometer calibration")
+        self.ctx.text(M.MAV_SEVERITY_INFO, "Barometer calibration complete")
 
     def _level(self) -> None:
-        roll, pitch = self.node.state.roll_rad, self.node.state.pitch_rad
+        roll, pitch = self.ctx.state.roll_rad, self.ctx.state.pitch_rad
         self._set("AHRS_TRIM_X", roll)
         self._set("AHRS_TRIM_Y", pitch)
-        self.node.send_text(M.MAV_SEVERITY_INFO, f"Trim OK: roll={math.degrees(roll):.2f} pitch={math.degrees(pitch):.2f}")
+        self.ctx.text(M.MAV_SEVERITY_INFO, f"Trim OK: roll={math.degrees(roll):.2f} pitch={math.degrees(pitch):.2f}")
 
     def _simple_accel(self) -> None:
         """Offsets from one level sample, scales 1, trim 0 (ArduPilot's simple_accel_cal)."""
@@ -155,20 +155,20 @@ class MaintenanceService(Service):
             if imu == 2 and not self._param("INS_ACC2_ID", 0):
                 continue
             for axis in "XYZ":
-                self._set(f"{prefix}OFFS_{axis}", imu_error(self.node.params, imu, axis)[0])
+                self._set(f"{prefix}OFFS_{axis}", imu_error(self.ctx.params, imu, axis)[0])
                 self._set(f"{prefix}SCAL_{axis}", 1.0)
         self._set("AHRS_TRIM_X", 0.0)
         self._set("AHRS_TRIM_Y", 0.0)
-        self.node.send_text(M.MAV_SEVERITY_INFO, "Accelerometer calibration complete")
+        self.ctx.text(M.MAV_SEVERITY_INFO, "Accelerometer calibration complete")
 
     def _airspeed(self) -> None:
-        self.node.send_text(M.MAV_SEVERITY_INFO, "Airspeed 1 calibrated")
+        self.ctx.text(M.MAV_SEVERITY_INFO, "Airspeed 1 calibrated")
 
     def _trim_radio(self) -> int:
         """ArduPlane's / Rover's trim_radio: each trimmed stick's RCn_TRIM becomes its current input
         (an RC override, else unchanged), at once: ACCEPTED."""
-        params, override = self.node.params, self.node.state.rc_override
-        for stick in self.node.vehicle.radio_trim_sticks:
+        params, override = self.ctx.params, self.ctx.state.rc_override
+        for stick in self.ctx.vehicle.radio_trim_sticks:
             n = rc.mapped_channel(params, stick)
             pwm = override.get(n)
             if pwm and f"RC{n}_TRIM" in params:
@@ -177,43 +177,43 @@ class MaintenanceService(Service):
         return ACCEPTED
 
     def _param(self, name: str, default: float) -> float:
-        return float(self.node.params.get(name)) if name in self.node.params else default
+        return float(self.ctx.params.get(name)) if name in self.ctx.params else default
 
     def _set(self, name: str, value: float) -> None:
-        if name in self.node.params:
-            self.node.params.set(name, value, force=True)
+        if name in self.ctx.params:
+            self.ctx.params.set(name, value, force=True)
 
     def accelcal_vehicle_pos(self, req: CommandRequest) -> int:
         result = self.accel.vehicle_pos(req.param1, req.inc.now)
-        self.node.wake(req.inc.channel)
+        self.ctx.wake(req.inc.channel)
         return result
 
     def handle_COMMAND_ACK(self, inc: Incoming) -> None:
         """A ground station's COMMAND_ACK is the "press any key" of the accelerometer dialogue."""
         requester = self.accel_requester
         if requester and inc.sender == requester[0] and self.accel.key(inc.now):
-            self.node.wake(inc.channel)
+            self.ctx.wake(inc.channel)
 
     def _send_asks(self, asks) -> None:
         if not asks or self.accel_requester is None:
             return
         (sysid, compid), channel = self.accel_requester
         for ask in asks:
-            self.node.reply(channel, M.MAVLink_command_long_message(
+            self.ctx.reply(channel, M.MAVLink_command_long_message(
                 sysid, compid, M.MAV_CMD_ACCELCAL_VEHICLE_POS, 0, float(ask.position), 0, 0, 0, 0, 0, 0))
             if ask.text:
                 severity = M.MAV_SEVERITY_INFO if ask.position != FAILURE else M.MAV_SEVERITY_CRITICAL
-                self.node.send_text(severity, ask.text)
+                self.ctx.text(severity, ask.text)
         if not self.accel.running():
             self._save_params()
 
     def _save_params(self) -> None:
-        self.node.param_service.save()
+        self.ctx.save_params()
 
     def storage_format(self, req: CommandRequest) -> int:
         if req.param1 != 1 or req.param2 != 1:
             return UNSUPPORTED
-        if self.node.state.armed:
+        if self.ctx.state.armed:
             return LATER
         return self._long(req, FORMAT_S, self._format)
 
@@ -230,12 +230,12 @@ class MaintenanceService(Service):
         except OSError as exc:
             log.error("storage_format_failed", root=str(root), error=str(exc))
             return FAILED
-        self.node.send_text(M.MAV_SEVERITY_INFO, "Storage formatted")
+        self.ctx.text(M.MAV_SEVERITY_INFO, "Storage formatted")
         return ACCEPTED
 
     def _long(self, req: CommandRequest, duration_s: float, finish) -> int:
         result = self.slot.start(req.command, req.inc.sender, req.inc.channel, req.inc.now, duration_s, finish)
-        self.node.wake(req.inc.channel)
+        self.ctx.wake(req.inc.channel)
         return result
 
     # --- storage, reboot, checks -------------------------------------------------------------
@@ -244,12 +244,12 @@ class MaintenanceService(Service):
             return ACCEPTED
         if req.param1 != 2:
             return UNSUPPORTED
-        store = self.node.params
+        store = self.ctx.params
         for entry in list(store.entries()):
             if not store.definition(entry.name).read_only:
                 store.set(entry.name, entry.default, force=True)
-        self.node.param_service.save()  # a failed write is reported later, as "Param save failed"
-        self.node.send_text(M.MAV_SEVERITY_WARNING, "All parameters reset to defaults")
+        self.ctx.save_params()  # a failed write is reported later, as "Param save failed"
+        self.ctx.text(M.MAV_SEVERITY_WARNING, "All parameters reset to defaults")
         return ACCEPTED
 
     def reboot(self, req: CommandRequest) -> int:
@@ -258,33 +258,33 @@ class MaintenanceService(Service):
             return ACCEPTED
         if what not in (1, 3):
             return UNSUPPORTED
-        if self.node.state.armed:
+        if self.ctx.state.armed:
             return FAILED
         self._reboot_now()
         return ACCEPTED
 
     def _reboot_now(self) -> None:
-        self.node.send_text(M.MAV_SEVERITY_INFO, "Rebooting")
+        self.ctx.text(M.MAV_SEVERITY_INFO, "Rebooting")
         self.mag.cancel()  # a reboot ends whatever calibration was running, unsaved
         self.accel.cancel()
         self.prearm_display = PrearmDisplay()
-        self.node.sim.reboot()
-        store = self.node.params
+        self.ctx.autopilot.reboot()
+        store = self.ctx.params
         store.set("STAT_BOOTCNT", store.get("STAT_BOOTCNT") + 1, force=True)
-        self.node.param_service.save()
-        self.node.send_banner()
+        self.ctx.save_params()
+        self.ctx.banner()
 
     def run_prearm_checks(self, req: CommandRequest) -> int:
-        if self.node.state.armed:
+        if self.ctx.state.armed:
             return LATER
-        for text in self.node.prearm_failures():
-            self.node.send_text(M.MAV_SEVERITY_CRITICAL, f"PreArm: {text}")
+        for text in self.ctx.prearm_failures():
+            self.ctx.text(M.MAV_SEVERITY_CRITICAL, f"PreArm: {text}")
         return ACCEPTED
 
     # --- compass calibration -----------------------------------------------------------------
     def start_mag_cal(self, req: CommandRequest) -> int:
-        if self.node.state.armed:
-            self.node.send_text(M.MAV_SEVERITY_NOTICE, "Disarm to allow compass calibration")
+        if self.ctx.state.armed:
+            self.ctx.text(M.MAV_SEVERITY_NOTICE, "Disarm to allow compass calibration")
             return FAILED
         if not self.mag.compasses():
             return UNSUPPORTED
@@ -292,7 +292,7 @@ class MaintenanceService(Service):
         result = self.mag.start(req.param1 if math.isfinite(req.param1) else -1, req.param3 != 0, delay, req.inc.now,
                                 autoreboot=math.isfinite(req.x) and req.x != 0)
         if result == ACCEPTED:
-            self.node.wake(req.inc.channel)
+            self.ctx.wake(req.inc.channel)
         return result
 
     def accept_mag_cal(self, req: CommandRequest) -> int:
@@ -309,14 +309,14 @@ class MaintenanceService(Service):
         """FIXED_MAG_CAL_YAW: calibrate from a known heading at once (the vehicle must be still):
         every compass in use gets the simulated magnetometer's offsets."""
         compasses = self.mag.compasses()
-        if self.node.state.armed or not compasses:
+        if self.ctx.state.armed or not compasses:
             return FAILED
         for index in compasses:
             offsets, _diag, _offdiag = self.mag.simulated_error(index)
             for name, value in zip(compass_params(index, "OFS"), offsets):
                 self._set(name, value)
         self._save_params()
-        self.node.send_text(M.MAV_SEVERITY_INFO, f"Mag cal from yaw {req.param1:.0f}: offsets saved")
+        self.ctx.text(M.MAV_SEVERITY_INFO, f"Mag cal from yaw {req.param1:.0f}: offsets saved")
         return ACCEPTED
 
     def _mag_cal_messages(self, channel, now: float) -> list:
@@ -325,18 +325,17 @@ class MaintenanceService(Service):
         for the other active channels (at most MAG_OUTBOX each)."""
         due = self.mag.messages(now) if self.mag.runs else []
         if due:
-            for link in self.node.links:
-                other = link.channel
+            for other in self.ctx.channels:
                 if other is channel or other.policy.private or not other.peers:
                     continue
                 box = self.mag_outbox.setdefault(other.index, [])
                 box.extend(due)
                 del box[:-MAG_OUTBOX]
-                self.node.wake(other)
+                self.ctx.wake(other)
             if self.mag.saved_any:
                 self.mag.saved_any = False
                 self._save_params()
-        if self.mag.reboot_due and not self.node.state.armed:
+        if self.mag.reboot_due and not self.ctx.state.armed:
             self.mag.reboot_due = False
             self._reboot_now()
         return due + self.mag_outbox.pop(channel.index, [])
@@ -349,11 +348,11 @@ class MaintenanceService(Service):
             self._send_asks(self.accel.poll(now))
         for msg in self._mag_cal_messages(channel, now):
             send(msg)
-        if self.node.vehicle.can_arm:
-            for text in self.prearm_display.poll(now, self.node.state.armed, self.node.prearm_failures):
-                self.node.send_text(M.MAV_SEVERITY_CRITICAL, text)
+        if self.ctx.vehicle.can_arm:
+            for text in self.prearm_display.poll(now, self.ctx.state.armed, self.ctx.prearm_failures):
+                self.ctx.text(M.MAV_SEVERITY_CRITICAL, text)
         deadlines = [d for d in (self.slot.next_deadline(), self.accel.next_deadline(), self.mag.next_deadline(),
-                                 self.prearm_display.next_deadline() if self.node.vehicle.can_arm else None)
+                                 self.prearm_display.next_deadline() if self.ctx.vehicle.can_arm else None)
                      if d is not None]
         return min(deadlines) if deadlines else None
 

@@ -4,7 +4,7 @@ MISSION_* messages are routed by their mission_type to that type's machine (gcsd
 an unknown type gets MISSION_ACK UNSUPPORTED (requests for items: silence, as in ArduPilot).
 MAV_MISSION_TYPE_ALL in MISSION_CLEAR_ALL clears all three (the MAVLink spec's meaning; ArduPilot
 answers UNSUPPORTED): DENIED if another node is uploading any of them, else one ACK with type ALL.
-What the machines return is written out here: `Send` with `node.reply` on its channel, `Text` as
+What the machines return is written out here: `Send` with `ctx.reply` on its channel, `Text` as
 STATUSTEXT (on that channel, or every ground station), `PlanChanged` logged and MISSION_CURRENT
 pushed. While an upload requests items on a link, that link's streams run x4 slower
 (`Link.set_slow("mission", ...)`). The machines' timers (re-request after the uploader's
@@ -69,16 +69,16 @@ class MissionService(Service):
         | M.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE | M.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
     )
 
-    def __init__(self, node, config: MissionConfig = MissionConfig(), state_dir: Path | None = None) -> None:
-        self.node = node
+    def __init__(self, ctx, config: MissionConfig = MissionConfig(), state_dir: Path | None = None) -> None:
+        self.ctx = ctx
         self.state_dir = None if state_dir is None else Path(state_dir)
-        self.mission = MissionStore(config.max_items, lambda: home_item(node.state), self._saver("mission"))
+        self.mission = MissionStore(config.max_items, lambda: home_item(ctx.state), self._saver("mission"))
         self.fence = FenceStore(config.max_fence, self._saver("fence"))
         self.rally = RallyStore(config.max_rally, self._saver("rally"))
         stores: tuple[PlanStore, ...] = (self.mission, self.fence, self.rally)
         for store in stores:
             self._load(store)
-        if node.state.has_home:
+        if ctx.state.has_home:
             self.mission.home_changed()
         retry_s = config.retry_ms / 1000.0
         self.rtt = RttTable(max_s=retry_s)  # starts at INITIAL_RTO_S, never beyond retry_ms
@@ -168,7 +168,7 @@ class MissionService(Service):
     # --- current item ------------------------------------------------------------------------
     def handle_MISSION_SET_CURRENT(self, inc: Incoming) -> None:
         if self._set_current(inc.msg.seq, False):
-            self.node.link(inc.channel).push(M.MAVLINK_MSG_ID_MISSION_CURRENT)
+            self.ctx.link(inc.channel).push(M.MAVLINK_MSG_ID_MISSION_CURRENT)
 
     def do_set_mission_current(self, req: CommandRequest) -> int:
         if not math.isfinite(req.param1) or not 0 <= req.param1 < self.mission.count():
@@ -188,15 +188,15 @@ class MissionService(Service):
 
     def current_message(self):
         """MISSION_CURRENT: the current item, the count without home, the mission's state."""
-        node = self.node
+        ctx = self.ctx
         count = self.mission.count()
-        auto = node.vehicle.mode_number("AUTO")
-        in_auto = auto is not None and node.state.mode == auto
+        auto = ctx.vehicle.mode_number("AUTO")
+        in_auto = auto is not None and ctx.state.mode == auto
         if count <= 1:
             state = M.MISSION_STATE_NO_MISSION
         elif self.complete:
             state = M.MISSION_STATE_COMPLETE
-        elif in_auto and node.state.armed:
+        elif in_auto and ctx.state.armed:
             state = M.MISSION_STATE_ACTIVE
         else:
             state = M.MISSION_STATE_NOT_STARTED
@@ -209,8 +209,8 @@ class MissionService(Service):
         if seq >= self.mission.count() - 1:
             self.complete = True
         msg = M.MAVLink_mission_item_reached_message(seq)
-        for index in self.node.text_channels():
-            self.node.reply(self.node.channels[index], msg)
+        for index in self.ctx.text_channels():
+            self.ctx.reply(self.ctx.channels[index], msg)
 
     def home_changed(self) -> None:
         """Home was set: with no mission, the mission becomes home alone."""
@@ -227,7 +227,7 @@ class MissionService(Service):
         t = self.transfers.get(mission_type)
         if t is None:
             return M.MAV_MISSION_UNSUPPORTED
-        result, out = t.write_plan(items, self.node.clock.now())
+        result, out = t.write_plan(items, self.ctx.now())
         self._run(out)
         return result
 
@@ -268,7 +268,7 @@ class MissionService(Service):
     def _ack(self, inc: Incoming, result: int) -> None:
         sysid, compid = inc.sender
         ack = M.MAVLink_mission_ack_message(sysid, compid, result, inc.msg.mission_type)
-        self.node.reply(inc.channel, ack)
+        self.ctx.reply(inc.channel, ack)
 
     def _guided(self, inc: Incoming, item: MissionItem | int, current: int) -> None:
         handler = self.guided_handler
@@ -276,12 +276,12 @@ class MissionService(Service):
         self._ack(inc, M.MAV_MISSION_ACCEPTED if ok else M.MAV_MISSION_ERROR)
 
     def _run(self, outputs) -> None:
-        node = self.node
+        ctx = self.ctx
         for out in outputs:
             if isinstance(out, Send):
-                node.reply(out.channel, out.msg)
+                ctx.reply(out.channel, out.msg)
             elif isinstance(out, Text):
-                node.send_text(out.severity, out.text, None if out.channel is None else {out.channel.index})
+                ctx.text(out.severity, out.text, None if out.channel is None else {out.channel.index})
             elif isinstance(out, PlanChanged):
                 log.info("mission_plan_replaced", type=_TYPE_NAMES[out.mission_type], count=out.count)
                 if out.mission_type == M.MAV_MISSION_TYPE_MISSION:
@@ -290,22 +290,21 @@ class MissionService(Service):
         self._update_slow()
         for t in self.transfers.values():
             if t.receiving:  # a request went out or is due: its deadline may be sooner than the
-                self.node.wake(t.upload_channel)  # channel task's next pass (tens of ms on loopback)
+                self.ctx.wake(t.upload_channel)  # channel task's next pass (tens of ms on loopback)
 
     def _push_current(self) -> None:
-        for link in self.node.links:
-            link.push(M.MAVLINK_MSG_ID_MISSION_CURRENT)
+        self.ctx.push(M.MAVLINK_MSG_ID_MISSION_CURRENT)
 
     def _update_slow(self) -> None:
         uploading = {t.upload_channel.index for t in self.transfers.values() if t.receiving}
         if uploading == self._slowed:
             return
         for index in uploading ^ self._slowed:
-            self.node.links[index].set_slow(SLOW_REASON, index in uploading)
+            self.ctx.set_slow(self.ctx.channels[index], SLOW_REASON, index in uploading)
         self._slowed = uploading
 
     def _slowdown_s(self, channel) -> float:
-        return self.node.link(channel).scheduler.slowdown_ms / 1000.0
+        return self.ctx.link(channel).scheduler.slowdown_ms / 1000.0
 
     @staticmethod
     def _queued_s(channel) -> float:

@@ -27,19 +27,20 @@ OUTBOX_MAX = 64
 
 
 class ModesService(Service):
-    def __init__(self, node) -> None:
-        self.node = node
+    def __init__(self, ctx, rates) -> None:
+        self.ctx = ctx
+        self.rates = rates  # every REQUEST_MESSAGE but AVAILABLE_MODES goes on to it
         self.outbox: dict[int, list] = {}  # channel index -> AVAILABLE_MODES to send after the ACK
 
     def commands(self):
         return {M.MAV_CMD_REQUEST_MESSAGE: self.request_message}
 
     def modes(self) -> list[tuple[int, str]]:
-        return sorted(self.node.vehicle.modes.items())
+        return sorted(self.ctx.vehicle.modes.items())
 
     def request_message(self, req: CommandRequest) -> int:
         if not math.isfinite(req.param1) or int(req.param1) != AVAILABLE_MODES:
-            return self.node.rates.request_message(req)
+            return self.rates.request_message(req)
         modes = self.modes()
         if not modes:
             return M.MAV_RESULT_DENIED
@@ -56,7 +57,7 @@ class ModesService(Service):
             box.append(ALL.MAVLink_available_modes_message(
                 len(modes), i, ALL.MAV_STANDARD_MODE_NON_STANDARD, number, 0, name.encode()[:34]))
         del box[:-OUTBOX_MAX]
-        self.node.wake(req.inc.channel)
+        self.ctx.wake(req.inc.channel)
         return M.MAV_RESULT_ACCEPTED
 
     def pending(self, channel, now: float, send) -> float | None:

@@ -64,8 +64,8 @@ PERSIST_INTERVAL_S = 1.0  # at most one write of mav.parm per second
 class ParamService(Service):
     capabilities = M.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
 
-    def __init__(self, node, store: ParamStore, save_path: Path | None, now: float = 0.0) -> None:
-        self.node = node
+    def __init__(self, ctx, store: ParamStore, save_path: Path | None, now: float = 0.0) -> None:
+        self.ctx = ctx
         self.store = store
         self.save_path = save_path
         self._lists: dict[tuple[int, int, int], int] = {}  # requester -> next index
@@ -145,7 +145,7 @@ class ParamService(Service):
         if not self._failing:
             self._failing = True
             log.error("params_save_failed", path=str(self.save_path), error=error)
-            self.node.send_text(M.MAV_SEVERITY_ERROR, "Param save failed")
+            self.ctx.text(M.MAV_SEVERITY_ERROR, "Param save failed")
         self.mark_dirty()
 
     def set_from_file(self, name: str, value: float, save: bool = True) -> bool:
@@ -165,9 +165,9 @@ class ParamService(Service):
     def handle_PARAM_REQUEST_LIST(self, inc: Incoming) -> None:
         key = (inc.frame.sysid, inc.frame.compid, inc.channel.index)
         self._lists[key] = 0
-        self.node.send_banner()
-        self.node.link(inc.channel).set_slow("params", True)
-        self.node.wake(inc.channel)
+        self.ctx.banner()
+        self.ctx.link(inc.channel).set_slow("params", True)
+        self.ctx.wake(inc.channel)
 
     def handle_PARAM_REQUEST_READ(self, inc: Incoming) -> None:
         m = inc.msg
@@ -176,7 +176,7 @@ class ParamService(Service):
         else:
             entry = self.store.entry_by_name(_name(m.param_id))
         if entry is not None:
-            self.node.reply(inc.channel, self._value_msg(entry))
+            self.ctx.reply(inc.channel, self._value_msg(entry))
 
     def handle_PARAM_SET(self, inc: Incoming) -> None:
         name = _name(inc.msg.param_id)
@@ -190,17 +190,17 @@ class ParamService(Service):
                 text = f"Param write denied ({name})"
             else:
                 text = f"Param {name} out of range ({d.min:g}..{d.max:g})"
-            self.node.send_text(M.MAV_SEVERITY_WARNING, text, channels={inc.channel.index})
-            self.node.reply(inc.channel, self._value_msg(entry))
+            self.ctx.text(M.MAV_SEVERITY_WARNING, text, channels={inc.channel.index})
+            self.ctx.reply(inc.channel, self._value_msg(entry))
             return
         if result is SetResult.CHANGED:
             self.mark_dirty()
             if self.store.definition(name).reboot:
-                self.node.send_text(M.MAV_SEVERITY_INFO, f"{name} takes effect at the next start")
+                self.ctx.text(M.MAV_SEVERITY_INFO, f"{name} takes effect at the next start")
         msg = self._value_msg(entry)
-        for channel in self.node.channels:
+        for channel in self.ctx.channels:
             if channel.peers and not channel.policy.private:
-                self.node.reply(channel, msg)
+                self.ctx.reply(channel, msg)
 
     # --- the paced list download -----------------------------------------------------------
     def pending(self, channel, now: float, send) -> float | None:
@@ -221,7 +221,7 @@ class ParamService(Service):
             if index >= len(self.store):
                 del self._lists[key]
         if not any(k[2] == channel.index for k in self._lists):
-            self.node.link(channel).set_slow("params", False)
+            self.ctx.link(channel).set_slow("params", False)
             return None
         paced = sent >= BURST and channel.config.type in DATAGRAM_TYPES
         return now + BURST_INTERVAL_S if paced else now

@@ -68,10 +68,9 @@ def _denied(req: CommandRequest) -> int:
 
 
 class PeripheralService(Service):
-    def __init__(self, node) -> None:
-        self.node = node
+    def __init__(self, ctx) -> None:
+        self.ctx = ctx
         self.gear_deployed = True
-        self.safety_on = False
         self.gripper_grabbed = False
         self.ekf_source_set = 1
         self.wind_estimate: tuple[float, float] | None = None
@@ -98,7 +97,7 @@ class PeripheralService(Service):
         return table
 
     def _param(self, name: str, default: float) -> float:
-        params = self.node.params
+        params = self.ctx.params
         return float(params.get(name)) if name in params else default
 
     def can_forward(self, req: CommandRequest) -> int:
@@ -113,10 +112,10 @@ class PeripheralService(Service):
         action = round(req.param2) if math.isfinite(req.param2) else -1
         if action == M.GRIPPER_ACTION_RELEASE:
             self.gripper_grabbed = False
-            self.node.send_text(M.MAV_SEVERITY_INFO, "Gripper load releasing")
+            self.ctx.text(M.MAV_SEVERITY_INFO, "Gripper load releasing")
         elif action == M.GRIPPER_ACTION_GRAB:
             self.gripper_grabbed = True
-            self.node.send_text(M.MAV_SEVERITY_INFO, "Gripper load grabbing")
+            self.ctx.text(M.MAV_SEVERITY_INFO, "Gripper load grabbing")
         else:
             return FAILED
         return ACCEPTED
@@ -124,18 +123,18 @@ class PeripheralService(Service):
     def parachute(self, req: CommandRequest) -> int:
         action = round(req.param1) if math.isfinite(req.param1) else -1
         if action in (M.PARACHUTE_DISABLE, M.PARACHUTE_ENABLE):
-            if "CHUTE_ENABLED" in self.node.params:
-                self.node.params.set("CHUTE_ENABLED", action, force=True)
+            if "CHUTE_ENABLED" in self.ctx.params:
+                self.ctx.params.set("CHUTE_ENABLED", action, force=True)
             return ACCEPTED
         if action != M.PARACHUTE_RELEASE:
             return FAILED
         if not self._param("CHUTE_ENABLED", 0):
-            self.node.send_text(M.MAV_SEVERITY_INFO, "Parachute: Not enabled")
-        elif not self.node.state.armed or self.node.state.on_ground:
-            self.node.send_text(M.MAV_SEVERITY_INFO, "Parachute: Landed")
+            self.ctx.text(M.MAV_SEVERITY_INFO, "Parachute: Not enabled")
+        elif not self.ctx.state.armed or self.ctx.state.on_ground:
+            self.ctx.text(M.MAV_SEVERITY_INFO, "Parachute: Landed")
         else:
-            self.node.send_text(M.MAV_SEVERITY_CRITICAL, "Parachute: Released")
-            self.node.sim.disarm("parachute released")
+            self.ctx.text(M.MAV_SEVERITY_CRITICAL, "Parachute: Released")
+            self.ctx.autopilot.disarm("parachute released")
         return ACCEPTED
 
     def landing_gear(self, req: CommandRequest) -> int:
@@ -143,17 +142,17 @@ class PeripheralService(Service):
         if position not in (0, 1):
             return FAILED
         self.gear_deployed = position == 0
-        self.node.send_text(M.MAV_SEVERITY_INFO, "LandingGear: " + ("DEPLOY" if self.gear_deployed else "RETRACT"))
+        self.ctx.text(M.MAV_SEVERITY_INFO, "LandingGear: " + ("DEPLOY" if self.gear_deployed else "RETRACT"))
         return ACCEPTED
 
     def safety_switch(self, req: CommandRequest) -> int:
         state = round(req.param1) if math.isfinite(req.param1) else -1
         if state == M.SAFETY_SWITCH_STATE_SAFE:
-            if self.node.state.armed:
+            if self.ctx.state.armed:
                 return DENIED
-            self.safety_on = True
+            self.ctx.state.safety_on = True
         elif state == M.SAFETY_SWITCH_STATE_DANGEROUS:
-            self.safety_on = False
+            self.ctx.state.safety_on = False
         else:
             return FAILED
         return ACCEPTED
@@ -164,7 +163,7 @@ class PeripheralService(Service):
         if not 0 <= percent <= 100:
             return FAILED
         if mask & 1:
-            s = self.node.state
+            s = self.ctx.state
             s.consumed_mah = s.capacity_mah * (1.0 - percent / 100.0)
         return ACCEPTED
 
@@ -186,13 +185,13 @@ class PeripheralService(Service):
         sysid = round(req.param1) if math.isfinite(req.param1) else 0
         if not 1 <= sysid <= 255:
             return DENIED
-        if "FOLL_SYSID" in self.node.params:
-            self.node.params.set("FOLL_SYSID", sysid, force=True)
+        if "FOLL_SYSID" in self.ctx.params:
+            self.ctx.params.set("FOLL_SYSID", sysid, force=True)
         return ACCEPTED
 
     def roi_sysid(self, req: CommandRequest) -> int:
         if req.param1 == 0:
-            self.node.sim.set_roi(None)
+            self.ctx.autopilot.set_roi(None)
             return ACCEPTED
         return FAILED
 
@@ -201,27 +200,27 @@ class PeripheralService(Service):
         position = round(req.param2) if math.isfinite(req.param2) else -1
         if not LOW <= position <= HIGH:
             return FAILED
-        node = self.node
+        ctx = self.ctx
         if function == AUX_NOTHING:
             return ACCEPTED
         if function in AUX_MODES:
             if position != HIGH:
                 return ACCEPTED
-            number = node.vehicle.mode_number(AUX_MODES[function])
-            return ACCEPTED if number is not None and node.control.set_mode(number) else FAILED
-        if function == AUX_FENCE and "FENCE_ENABLE" in node.params:
+            number = ctx.vehicle.mode_number(AUX_MODES[function])
+            return ACCEPTED if number is not None and ctx.control.set_mode(number) else FAILED
+        if function == AUX_FENCE and "FENCE_ENABLE" in ctx.params:
             if position != MIDDLE:
-                node.params.set("FENCE_ENABLE", int(position == HIGH), force=True)
+                ctx.params.set("FENCE_ENABLE", int(position == HIGH), force=True)
             return ACCEPTED
         if function == AUX_DISARM:
             if position == HIGH:
-                node.sim.disarm("auxiliary switch")
+                ctx.autopilot.disarm("auxiliary switch")
             return ACCEPTED
         if function == AUX_ARMDISARM:
-            if position == HIGH and not node.state.armed:
-                return node.control._arm(forced=False)
+            if position == HIGH and not ctx.state.armed:
+                return ctx.control.arm(forced=False)
             if position == LOW:
-                node.sim.disarm("auxiliary switch")
+                ctx.autopilot.disarm("auxiliary switch")
             return ACCEPTED
-        node.send_text(M.MAV_SEVERITY_INFO, f"Invalid channel option ({function})")
+        ctx.text(M.MAV_SEVERITY_INFO, f"Invalid channel option ({function})")
         return FAILED

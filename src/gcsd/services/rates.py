@@ -21,14 +21,14 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from ..msgids import ACCEPTED, DENIED, FAILED
 from ..scheduler import MAX_INTERVAL_MS
 from ..streams import REQUEST_DATA_STREAM_IDS
-from ..telemetry import PRODUCERS
 from . import Incoming, Service
 from .commands import CommandRequest
 
 
 class RatesService(Service):
-    def __init__(self, node) -> None:
-        self.node = node
+    def __init__(self, ctx, producers) -> None:
+        self.ctx = ctx
+        self.producers = producers  # the ids that can be streamed or requested at all
 
     def commands(self):
         return {
@@ -49,27 +49,27 @@ class RatesService(Service):
         if streams is None:
             return
         rate = m.req_message_rate if m.start_stop == 1 else 0
-        link = self.node.link(inc.channel)
+        link = self.ctx.link(inc.channel)
         for stream in streams:
             link.set_stream_rate(stream, rate, inc.now)
 
     def handle_AUTOPILOT_VERSION_REQUEST(self, inc: Incoming) -> None:
-        self.node.link(inc.channel).push(M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+        self.ctx.link(inc.channel).push(M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
 
     def handle_RADIO_STATUS(self, inc: Incoming) -> None:
-        self.node.link(inc.channel).radio_txbuf(inc.msg.txbuf, inc.now)
+        self.ctx.link(inc.channel).radio_txbuf(inc.msg.txbuf, inc.now)
 
     handle_RADIO = handle_RADIO_STATUS
 
     # --- commands --------------------------------------------------------------------------
     def set_message_interval(self, req: CommandRequest) -> int:
         msgid, interval_us = int(req.param1), req.param2
-        if req.param3 != 0 or msgid not in PRODUCERS:
+        if req.param3 != 0 or msgid not in self.producers:
             return DENIED
         channel = req.inc.channel
         if "no_stream_override" in channel.config.options:
             return DENIED
-        link = self.node.link(channel)
+        link = self.ctx.link(channel)
         if interval_us == 0:
             link.reset_interval(msgid, req.inc.now)
             return ACCEPTED
@@ -79,8 +79,8 @@ class RatesService(Service):
         if interval_us < 0:
             return DENIED
         interval_ms = min(max(int(interval_us // 1000), 1), MAX_INTERVAL_MS)
-        if interval_ms < self.node.min_interval_ms:
-            self.node.send_text(
+        if interval_ms < self.ctx.min_interval_ms:
+            self.ctx.text(
                 M.MAV_SEVERITY_WARNING,
                 f"Requested rate for message ID {msgid} too fast. Increase SCHED_LOOP_RATE",
                 channels={channel.index},
@@ -94,25 +94,25 @@ class RatesService(Service):
 
     def _report_interval(self, req: CommandRequest, msgid: int) -> int:
         channel = req.inc.channel
-        if msgid >= 65536 or msgid < 0 or msgid not in PRODUCERS:
-            self.node.reply(channel, M.MAVLink_message_interval_message(max(0, min(msgid, 65535)), 0))
+        if msgid >= 65536 or msgid < 0 or msgid not in self.producers:
+            self.ctx.reply(channel, M.MAVLink_message_interval_message(max(0, min(msgid, 65535)), 0))
             return FAILED
-        interval_ms = self.node.link(channel).interval_ms(msgid)
+        interval_ms = self.ctx.link(channel).interval_ms(msgid)
         interval_us = -1 if not interval_ms else interval_ms * 1000
-        self.node.reply(channel, M.MAVLink_message_interval_message(msgid, interval_us))
+        self.ctx.reply(channel, M.MAVLink_message_interval_message(msgid, interval_us))
         return ACCEPTED
 
     def request_message(self, req: CommandRequest) -> int:
         msgid = int(req.param1)
         if msgid == M.MAVLINK_MSG_ID_MESSAGE_INTERVAL:
             return self._report_interval(req, int(req.param2))
-        if msgid not in PRODUCERS:
+        if msgid not in self.producers:
             return FAILED
-        self.node.link(req.inc.channel).push(msgid)
+        self.ctx.link(req.inc.channel).push(msgid)
         return ACCEPTED
 
     def request_autopilot_capabilities(self, req: CommandRequest) -> int:
         if int(req.param1) != 1:
             return FAILED
-        self.node.link(req.inc.channel).push(M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+        self.ctx.link(req.inc.channel).push(M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
         return ACCEPTED

@@ -140,13 +140,13 @@ def open_serial(device: str, baud: int):
 
 
 class SerialControlService(Service):
-    def __init__(self, node, ports, open_port: Callable = open_serial) -> None:
-        self.node = node
+    def __init__(self, ctx, ports, open_port: Callable = open_serial) -> None:
+        self.ctx = ctx
         self.passthrough = SerialPassthrough(ports, open_port)
 
     def handle_SERIAL_CONTROL(self, inc: Incoming) -> None:
         self.passthrough.handle(inc.msg, inc.sender, inc.channel, inc.now)
-        self.node.wake(inc.channel)
+        self.ctx.wake(inc.channel)
 
     def pending(self, channel, now: float, send) -> float | None:
         for msg in self.passthrough.replies(channel, now):

@@ -15,27 +15,27 @@ from . import Incoming, Service
 
 
 class SigningService(Service):
-    def __init__(self, node, manager) -> None:
-        self.node = node
+    def __init__(self, ctx, manager) -> None:
+        self.ctx = ctx
         self.manager = manager
 
     def handle_SETUP_SIGNING(self, inc: Incoming) -> None:
-        node = self.node
+        ctx = self.ctx
         here = {inc.channel.index}
-        if inc.msg.target_system != node.sysid:
+        if inc.msg.target_system != ctx.sysid:
             return
         trusted = inc.channel.unsigned_ok or (inc.frame.signed and self.manager.signing.key is not None)
         if not trusted:
-            node.send_text(M.MAV_SEVERITY_ERROR, "ERROR: signing setup needs a signed or unsigned_ok link", channels=here)
+            ctx.text(M.MAV_SEVERITY_ERROR, "ERROR: signing setup needs a signed or unsigned_ok link", channels=here)
             return
-        if node.state.armed:
-            node.send_text(M.MAV_SEVERITY_ERROR, "ERROR: Won't setup signing when armed", channels=here)
+        if ctx.state.armed:
+            ctx.text(M.MAV_SEVERITY_ERROR, "ERROR: Won't setup signing when armed", channels=here)
             return
         key = bytes(inc.msg.secret_key)
         try:
-            self.manager.apply_key(key, inc.msg.initial_timestamp, node.clock.wall())
+            self.manager.apply_key(key, inc.msg.initial_timestamp, ctx.wall())
         except OSError:
-            node.send_text(M.MAV_SEVERITY_ERROR, "ERROR: Failed to save signing key", channels=here)
+            ctx.text(M.MAV_SEVERITY_ERROR, "ERROR: Failed to save signing key", channels=here)
             return
         state = "disabled" if self.manager.signing.key is None else "enabled"
-        node.send_text(M.MAV_SEVERITY_INFO, f"Signing {state}", channels=here)
+        ctx.text(M.MAV_SEVERITY_INFO, f"Signing {state}", channels=here)

@@ -9,11 +9,11 @@ from . import Incoming, Service
 
 
 class TimesyncService(Service):
-    def __init__(self, node) -> None:
-        self.node = node
+    def __init__(self, ctx) -> None:
+        self.ctx = ctx
 
     def handle_TIMESYNC(self, inc: Incoming) -> None:
         if inc.msg.tc1 != 0:
             return
-        now_ns = int(self.node.clock.since_boot(inc.now) * 1e9)
-        self.node.reply(inc.channel, M.MAVLink_timesync_message(now_ns, inc.msg.ts1))
+        now_ns = self.ctx.time_usec(inc.now) * 1000
+        self.ctx.reply(inc.channel, M.MAVLink_timesync_message(now_ns, inc.msg.ts1))

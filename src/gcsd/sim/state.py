@@ -53,6 +53,7 @@ class VehicleState:
     airspeed_ms: float = 0.0
     throttle_pct: int = 0
     armed: bool = False
+    safety_on: bool = False  # MAV_CMD_DO_SET_SAFETY_SWITCH_STATE (pre-arm: "safety switch")
     mode: int = 0
     landed: Landed = Landed.ON_GROUND
     gps_fix_type: int = 3  # GPS_FIX_TYPE_3D_FIX

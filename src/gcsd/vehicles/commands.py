@@ -1,7 +1,7 @@
-"""Commands whose meaning differs per vehicle type: `handler(node, request) -> MAV_RESULT`.
+"""Commands whose meaning differs per vehicle type: `handler(ctx, request) -> MAV_RESULT`.
 
 A vehicle type lists the ones it supports in `VehicleType.commands` (COPTER_COMMANDS etc. at
-the end); that table wins over the generic services' handlers (autopilot.attach applies it
+the end); that table wins over the generic services' handlers (compose.py registers it
 last), so a vehicle type can also say `unsupported` (ArduPilot's vehicle code has no case for
 the command: CONDITION_YAW on a plane, landing gear on a rover) or `failed`. Which answer each
 gets follows ArduPilot SITL's (../shared/ardupilot/*-probe.json; docs/commands.md).
@@ -30,25 +30,25 @@ from . import prearm
 UNSUPPORTED = M.MAV_RESULT_UNSUPPORTED
 
 
-def takeoff_in_guided(node, req) -> int:
+def takeoff_in_guided(ctx, req) -> int:
     alt = req.z
     if not math.isfinite(alt) or alt <= 0:
-        alt = node.sim.settings.takeoff_alt_m
-    return ACCEPTED if node.sim.takeoff(alt) else FAILED
+        alt = ctx.autopilot.settings.takeoff_alt_m
+    return ACCEPTED if ctx.autopilot.takeoff(alt) else FAILED
 
 
-def takeoff_mode(node, req) -> int:
+def takeoff_mode(ctx, req) -> int:
     if math.isfinite(req.z) and req.z > 0:
-        node.sim.set_takeoff_alt(req.z)
-    return ACCEPTED if node.sim.set_mode("TAKEOFF") else FAILED
+        ctx.autopilot.set_takeoff_alt(req.z)
+    return ACCEPTED if ctx.autopilot.set_mode("TAKEOFF") else FAILED
 
 
-def land_start(node, req) -> int:
-    items = node.mission.mission.stored()
+def land_start(ctx, req) -> int:
+    items = ctx.plans.mission.stored()
     for seq, item in enumerate(items):
         if item.command == M.MAV_CMD_DO_LAND_START:
-            node.mission.mission.set_current(seq)
-            return ACCEPTED if node.sim.start_mission(seq) else FAILED
+            ctx.plans.mission.set_current(seq)
+            return ACCEPTED if ctx.autopilot.start_mission(seq) else FAILED
     return FAILED
 
 
@@ -56,9 +56,9 @@ MOTOR_TEST_MAX_S = 30.0  # ArduCopter's MOTOR_TEST_TIMEOUT_MS_MAX
 THROTTLE_PERCENT, THROTTLE_PWM = M.MOTOR_TEST_THROTTLE_PERCENT, M.MOTOR_TEST_THROTTLE_PWM
 
 
-def _motor_pwm_range(node) -> tuple[float, float]:
+def _motor_pwm_range(ctx) -> tuple[float, float]:
     """ArduCopter's get_pwm_output_min/max: MOT_PWM_MIN/MAX, or RC3_MIN/MAX where those are 0."""
-    p = node.params
+    p = ctx.params
     lo = p.get("MOT_PWM_MIN") if "MOT_PWM_MIN" in p else 0
     hi = p.get("MOT_PWM_MAX") if "MOT_PWM_MAX" in p else 0
     if not lo or not hi:
@@ -66,30 +66,30 @@ def _motor_pwm_range(node) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
-def motor_test(node, req) -> int:
+def motor_test(ctx, req) -> int:
     """ArduCopter's mavlink_motor_test_start: param1 motor (the output whose SERVOn_FUNCTION is that
     motor), param2 throttle type (0 percent of MOT_PWM_MIN..MAX, 1 PWM), param3 throttle, param4
     seconds (at most 30). Refused (FAILED, with
     ArduPilot's STATUSTEXT) when armed, not landed, with the safety switch on or, for a percentage,
     with RC not calibrated; a motor beyond the frame's outputs or a throttle out of range: FAILED."""
-    if node.state.armed:
-        node.send_text(M.MAV_SEVERITY_CRITICAL, "Must be disarmed for motor test")
+    if ctx.state.armed:
+        ctx.text(M.MAV_SEVERITY_CRITICAL, "Must be disarmed for motor test")
         return FAILED
-    reasons = [("Motor Test: vehicle not landed", not node.state.on_ground),
-               ("Motor Test: Safety switch", "Hardware safety switch" in prearm.safety_switch(node)),
-               ("Motor Test: RC not calibrated", req.param2 != THROTTLE_PWM and bool(prearm.rc_calibration(node)))]
+    reasons = [("Motor Test: vehicle not landed", not ctx.state.on_ground),
+               ("Motor Test: Safety switch", "Hardware safety switch" in prearm.safety_switch(ctx)),
+               ("Motor Test: RC not calibrated", req.param2 != THROTTLE_PWM and bool(prearm.rc_calibration(ctx)))]
     for text, failing in reasons:
         if failing:
-            node.send_text(M.MAV_SEVERITY_CRITICAL, text)
+            ctx.text(M.MAV_SEVERITY_CRITICAL, text)
             return FAILED
     motor = int(req.param1) if math.isfinite(req.param1) else 0
-    get = node.params.get
-    outputs = {int(get(f"SERVO{n}_FUNCTION")) - 32: n for n in range(1, 17) if f"SERVO{n}_FUNCTION" in node.params
+    get = ctx.params.get
+    outputs = {int(get(f"SERVO{n}_FUNCTION")) - 32: n for n in range(1, 17) if f"SERVO{n}_FUNCTION" in ctx.params
                and 33 <= get(f"SERVO{n}_FUNCTION") <= 40}  # motor number -> output
     if motor not in outputs:
         return FAILED
     output = outputs[motor]
-    lo, hi = _motor_pwm_range(node)
+    lo, hi = _motor_pwm_range(ctx)
     if req.param2 == THROTTLE_PWM and lo <= req.param3 <= hi:
         pwm = req.param3
     elif req.param2 == THROTTLE_PERCENT and 0 <= req.param3 <= 100:
@@ -99,146 +99,146 @@ def motor_test(node, req) -> int:
     servo_lo, servo_hi = get(f"SERVO{output}_MIN"), get(f"SERVO{output}_MAX")
     percent_of_servo = 100.0 * (pwm - servo_lo) / max(servo_hi - servo_lo, 1)  # what outputs.motor_test takes
     seconds = max(0.0, min(req.param4, MOTOR_TEST_MAX_S)) if math.isfinite(req.param4) else 0.0
-    node.send_text(M.MAV_SEVERITY_INFO, "starting motor test")
-    node.sim.motor_test(output, percent_of_servo, seconds)
+    ctx.text(M.MAV_SEVERITY_INFO, "starting motor test")
+    ctx.autopilot.motor_test(output, percent_of_servo, seconds)
     return ACCEPTED
 
 
-def set_reverse(node, req) -> int:
-    node.sim.reversed = req.param1 >= 1
+def set_reverse(ctx, req) -> int:
+    ctx.autopilot.reversed = req.param1 >= 1
     return ACCEPTED
 
 
 # --- per-vehicle answers ArduPilot gives (../shared/ardupilot/*-probe.json; docs/commands.md) ---
 
 
-def unsupported(node, req) -> int:
+def unsupported(ctx, req) -> int:
     """The vehicle type does not handle this command (ArduPilot's vehicle code has no case for it)."""
     return UNSUPPORTED
 
 
-def failed(node, req) -> int:
+def failed(ctx, req) -> int:
     """The vehicle type has the feature compiled in but nothing to do it with (no sprayer on a plane...)."""
     return FAILED
 
 
-def condition_yaw_any_mode(node, req) -> int:
+def condition_yaw_any_mode(ctx, req) -> int:
     """ArduCopter: CONDITION_YAW sets the auto-yaw target in any mode (angle 0..360, param4 0 absolute
     or 1 relative), else FAILED."""
     if not 0 <= req.param1 <= 360 or req.param4 not in (0, 1):
         return FAILED
-    node.sim.condition_yaw(req.param1, req.param2, req.param3, req.param4)
+    ctx.autopilot.condition_yaw(req.param1, req.param2, req.param3, req.param4)
     return ACCEPTED
 
 
-def change_speed_copter(node, req) -> int:
+def change_speed_copter(ctx, req) -> int:
     """ArduCopter: a speed that is not positive is DENIED; else the current mode takes it or FAILED."""
     if not req.param2 > 0:
         return DENIED
-    return ACCEPTED if node.sim.change_speed(req.param2) else FAILED
+    return ACCEPTED if ctx.autopilot.change_speed(req.param2) else FAILED
 
 
-def change_speed(node, req) -> int:
+def change_speed(ctx, req) -> int:
     """ArduPlane / Rover: no positive speed, or a mode that cannot take one: FAILED."""
     if not req.param2 > 0:
         return FAILED
-    return ACCEPTED if node.sim.change_speed(req.param2) else FAILED
+    return ACCEPTED if ctx.autopilot.change_speed(req.param2) else FAILED
 
 
-def flight_termination(node, req) -> int:
+def flight_termination(ctx, req) -> int:
     """param1 > 0.5 terminates (the motors stop: disarmed); anything else is FAILED, as ArduPilot."""
     if req.param1 > 0.5:
-        node.sim.disarm("flight termination")
+        ctx.autopilot.disarm("flight termination")
         return ACCEPTED
     return FAILED
 
 
-def _jump_to(node, command: int) -> int:
-    items = node.mission.mission.stored()
+def _jump_to(ctx, command: int) -> int:
+    items = ctx.plans.mission.stored()
     for seq, item in enumerate(items):
         if item.command == command:
-            node.mission.mission.set_current(seq)
-            return ACCEPTED if node.sim.start_mission(seq) else FAILED
+            ctx.plans.mission.set_current(seq)
+            return ACCEPTED if ctx.autopilot.start_mission(seq) else FAILED
     return FAILED
 
 
-def return_path_start(node, req) -> int:
+def return_path_start(ctx, req) -> int:
     """DO_RETURN_PATH_START: continue the mission from its DO_RETURN_PATH_START item (none: FAILED)."""
-    return _jump_to(node, M.MAV_CMD_DO_RETURN_PATH_START)
+    return _jump_to(ctx, M.MAV_CMD_DO_RETURN_PATH_START)
 
 
-def land_mode(node, req) -> int:
+def land_mode(ctx, req) -> int:
     """NAV_VTOL_LAND on a copter is NAV_LAND: LAND mode."""
-    number = node.vehicle.mode_number("LAND")
-    return ACCEPTED if number is not None and node.control.set_mode(number) else FAILED
+    number = ctx.vehicle.mode_number("LAND")
+    return ACCEPTED if number is not None and ctx.control.set_mode(number) else FAILED
 
 
-def solo_fly_click(node, req) -> int:
+def solo_fly_click(ctx, req) -> int:
     """ArduCopter's Solo "Fly" button: LOITER (ALT_HOLD without a position), always ACCEPTED."""
     for name in ("LOITER", "ALT_HOLD"):
-        number = node.vehicle.mode_number(name)
-        if number is not None and node.control.set_mode(number):
+        number = ctx.vehicle.mode_number(name)
+        if number is not None and ctx.control.set_mode(number):
             break
     return ACCEPTED
 
 
-def solo_fly_hold(node, req) -> int:
+def solo_fly_hold(ctx, req) -> int:
     """Solo "Fly" held: arm when disarmed (pre-arm checks apply), take off when armed and landed."""
-    if not node.state.armed:
-        node.control._arm(forced=False)
-    elif node.state.on_ground:
-        node.sim.takeoff(req.param1 if req.param1 > 0 else node.sim.settings.takeoff_alt_m)
+    if not ctx.state.armed:
+        ctx.control.arm(forced=False)
+    elif ctx.state.on_ground:
+        ctx.autopilot.takeoff(req.param1 if req.param1 > 0 else ctx.autopilot.settings.takeoff_alt_m)
     return ACCEPTED
 
 
-def solo_pause_click(node, req) -> int:
+def solo_pause_click(ctx, req) -> int:
     """Solo "Pause": BRAKE when flying; always ACCEPTED."""
-    if node.state.armed and not node.state.on_ground:
-        number = node.vehicle.mode_number("BRAKE")
+    if ctx.state.armed and not ctx.state.on_ground:
+        number = ctx.vehicle.mode_number("BRAKE")
         if number is not None:
-            node.control.set_mode(number)
+            ctx.control.set_mode(number)
     return ACCEPTED
 
 
-def sprayer(node, req) -> int:
+def sprayer(ctx, req) -> int:
     """DO_SPRAYER (AC_Sprayer): param1 1 on, 0 off; ACCEPTED as ArduPilot (it only sprays with
     SPRAY_ENABLE set and the vehicle moving)."""
     return ACCEPTED
 
 
-def autotune_enable(node, req) -> int:
+def autotune_enable(ctx, req) -> int:
     """ArduPlane DO_AUTOTUNE_ENABLE: 0 turns autotune off (nothing runs: ACCEPTED); the simulation has
     no autotuner, so turning it on is FAILED."""
     return ACCEPTED if req.param1 == 0 else FAILED
 
 
-def go_around(node, req) -> int:
+def go_around(ctx, req) -> int:
     """ArduPlane DO_GO_AROUND: only while landing (then RTL); else FAILED."""
-    if not node.state.armed or node.state.on_ground or node.sim.behaviour != Behaviour.LAND:
+    if not ctx.state.armed or ctx.state.on_ground or ctx.autopilot.behaviour != Behaviour.LAND:
         return FAILED
-    return ACCEPTED if node.sim.set_mode("RTL") else FAILED
+    return ACCEPTED if ctx.autopilot.set_mode("RTL") else FAILED
 
 
-def _in_guided(node) -> bool:
-    return node.sim.in_guided()
+def _in_guided(ctx) -> bool:
+    return ctx.autopilot.in_guided()
 
 
-def guided_change_speed(node, req) -> int:
+def guided_change_speed(ctx, req) -> int:
     """ArduPlane GUIDED_CHANGE_SPEED: GUIDED only (param2 m/s)."""
-    if not _in_guided(node) or not req.param2 > 0:
+    if not _in_guided(ctx) or not req.param2 > 0:
         return FAILED
-    return ACCEPTED if node.sim.change_speed(req.param2) else FAILED
+    return ACCEPTED if ctx.autopilot.change_speed(req.param2) else FAILED
 
 
-def guided_change_altitude(node, req) -> int:
+def guided_change_altitude(ctx, req) -> int:
     """ArduPlane GUIDED_CHANGE_ALTITUDE: GUIDED only (param3 m above home)."""
-    if not _in_guided(node):
+    if not _in_guided(ctx):
         return FAILED
-    s = node.state
-    return ACCEPTED if node.sim.change_altitude(s.home_alt_m + req.param3) else FAILED
+    s = ctx.state
+    return ACCEPTED if ctx.autopilot.change_altitude(s.home_alt_m + req.param3) else FAILED
 
 
-def set_hagl(node, req) -> int:
+def set_hagl(ctx, req) -> int:
     """ArduPlane SET_HAGL: an external height above ground for the flare; the simulation knows its
     height, so the estimate is taken (ACCEPTED) and not needed."""
     return ACCEPTED

@@ -4,11 +4,11 @@ ArduPilot builds the three masks in GCS::update_sensor_status_flags and each veh
 update_vehicle_sensor_status_flags; `../shared/ardupilot/*-probe.json` shows the result for
 copter, plane and rover on SITL. Here a `SensorProfile` per vehicle type holds what is fixed
 (sensors fitted, the bits ArduPilot reports healthy without a device: PROXIMITY on a copter,
-LASER_POSITION on a rover) and `sensor_bits(node)` adds what depends on state:
+LASER_POSITION on a rover) and `sensor_bits(ctx)` adds what depends on state:
 
 | bit | present | enabled | healthy |
 |---|---|---|---|
-| PREARM_CHECK | always | always | `node.prearm_failures()` is empty (or armed: the checks passed at arming) |
+| PREARM_CHECK | always | always | `ctx.prearm_failures()` is empty (or armed: the checks passed at arming) |
 | GEOFENCE | FENCE_TYPE has altitude/circle, or polygons with a fence plan loaded | FENCE_ENABLE | not breached now |
 | GPS | the simulated GPS is there (fix type >= 1) | same | 3D fix |
 | AHRS | always | GPS 3D fix (the EKF has its origin) | same |
@@ -20,7 +20,7 @@ LASER_POSITION on a rover) and `sensor_bits(node)` adds what depends on state:
 | LOGGING | always | never (ArduPilot sets it only while logging armed) | always |
 | rate / attitude / yaw / XY / Z control | profile | by flight mode, ArduPilot's per-vehicle mode lists | = enabled |
 
-`system_status(node)` gives HEARTBEAT.system_status by the same per-vehicle rules.
+`system_status(ctx)` gives HEARTBEAT.system_status by the same per-vehicle rules.
 
 Differences from the probe files, on purpose: ArduPlane SITL reported TERRAIN unhealthy and Rover
 SITL AHRS unhealthy 19 s after boot, while their EKF and terrain loader were still settling;
@@ -115,27 +115,27 @@ PROFILES = {"copter": COPTER, "plane": PLANE, "rover": ROVER, "sub": SUB, "blimp
             "companion": COMPANION}
 
 
-def _param(node, name: str, default: float) -> float:
-    return float(node.params.get(name)) if name in node.params else default
+def _param(ctx, name: str, default: float) -> float:
+    return float(ctx.params.get(name)) if name in ctx.params else default
 
 
-def _fence_bits(node) -> tuple[bool, bool, bool]:
-    if "FENCE_TYPE" not in node.params:
+def _fence_bits(ctx) -> tuple[bool, bool, bool]:
+    if "FENCE_TYPE" not in ctx.params:
         return False, False, True
-    types = int(_param(node, "FENCE_TYPE", 0))
-    polygons = bool(types & fence_check.POLYGON) and bool(node.mission.fence.stored())
+    types = int(_param(ctx, "FENCE_TYPE", 0))
+    polygons = bool(types & fence_check.POLYGON) and bool(ctx.plans.fence.stored())
     present = bool(types & (fence_check.ALT_MAX | fence_check.CIRCLE | fence_check.ALT_MIN)) or polygons
-    enabled = bool(_param(node, "FENCE_ENABLE", 0))
-    healthy = not (enabled and node.sim.failsafes.fence_breached)
+    enabled = bool(_param(ctx, "FENCE_ENABLE", 0))
+    healthy = not (enabled and ctx.autopilot.failsafes.fence_breached)
     return present, enabled, healthy
 
 
-def sensor_bits(node) -> tuple[int, int, int]:
+def sensor_bits(ctx) -> tuple[int, int, int]:
     """(present, enabled, healthy) for the node's SYS_STATUS now."""
-    profile = PROFILES.get(node.vehicle.name, COMPANION)
+    profile = PROFILES.get(ctx.vehicle.name, COMPANION)
     if profile is COMPANION:
         return 0, 0, 0
-    s = node.state
+    s = ctx.state
     present = enabled = healthy = profile.always
     healthy |= profile.health_only | M.MAV_SYS_STATUS_LOGGING
     present |= M.MAV_SYS_STATUS_LOGGING | M.MAV_SYS_STATUS_AHRS | M.MAV_SYS_STATUS_SENSOR_RC_RECEIVER
@@ -145,10 +145,10 @@ def sensor_bits(node) -> tuple[int, int, int]:
 
     present |= M.MAV_SYS_STATUS_PREARM_CHECK
     enabled |= M.MAV_SYS_STATUS_PREARM_CHECK
-    if s.armed or not node.prearm_failures():
+    if s.armed or not ctx.prearm_failures():
         healthy |= M.MAV_SYS_STATUS_PREARM_CHECK
 
-    fence_present, fence_enabled, fence_healthy = _fence_bits(node)
+    fence_present, fence_enabled, fence_healthy = _fence_bits(ctx)
     present |= M.MAV_SYS_STATUS_GEOFENCE if fence_present else 0
     enabled |= M.MAV_SYS_STATUS_GEOFENCE if fence_enabled else 0
     healthy |= M.MAV_SYS_STATUS_GEOFENCE if fence_healthy else 0
@@ -160,40 +160,40 @@ def sensor_bits(node) -> tuple[int, int, int]:
         healthy |= M.MAV_SYS_STATUS_SENSOR_GPS | M.MAV_SYS_STATUS_AHRS
         enabled |= M.MAV_SYS_STATUS_AHRS
 
-    if _param(node, "COMPASS_USE", 1):
+    if _param(ctx, "COMPASS_USE", 1):
         present |= M.MAV_SYS_STATUS_SENSOR_3D_MAG
         enabled |= M.MAV_SYS_STATUS_SENSOR_3D_MAG
         healthy |= M.MAV_SYS_STATUS_SENSOR_3D_MAG
-    if _param(node, "BATT_MONITOR", 4):
+    if _param(ctx, "BATT_MONITOR", 4):
         present |= M.MAV_SYS_STATUS_SENSOR_BATTERY
         enabled |= M.MAV_SYS_STATUS_SENSOR_BATTERY
         if s.failsafe != "Battery":
             healthy |= M.MAV_SYS_STATUS_SENSOR_BATTERY
-    if profile.airspeed and _param(node, "ARSPD_TYPE", 2):
+    if profile.airspeed and _param(ctx, "ARSPD_TYPE", 2):
         bit = M.MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE
         present, enabled, healthy = present | bit, enabled | bit, healthy | bit
-    if profile.terrain and _param(node, "TERRAIN_ENABLE", 1):
+    if profile.terrain and _param(ctx, "TERRAIN_ENABLE", 1):
         bit = M.MAV_SYS_STATUS_TERRAIN
         present, enabled, healthy = present | bit, enabled | bit, healthy | bit
 
     present |= profile.control
-    loops = (profile.modes or {}).get(node.vehicle.mode_name(s.mode), 0) & profile.control
+    loops = (profile.modes or {}).get(ctx.vehicle.mode_name(s.mode), 0) & profile.control
     enabled |= loops
     healthy |= loops
     return present, enabled, healthy
 
 
-def system_status(node) -> int:
+def system_status(ctx) -> int:
     """HEARTBEAT.system_status as each ArduPilot vehicle sets it: CRITICAL while a failsafe is in
     force; ArduCopter STANDBY while landed (armed or not: QGroundControl then offers takeoff, not
     land), ArduPlane STANDBY unless flying, Rover ACTIVE unless in HOLD (Rover's
     vehicle_system_status); the other types STANDBY disarmed, ACTIVE armed."""
-    s = node.state
+    s = ctx.state
     if s.failsafe is not None and (s.armed or not s.on_ground):
         return M.MAV_STATE_CRITICAL
-    standby = PROFILES.get(node.vehicle.name, COMPANION).standby
+    standby = PROFILES.get(ctx.vehicle.name, COMPANION).standby
     if standby == "landed":
         return M.MAV_STATE_STANDBY if s.on_ground else M.MAV_STATE_ACTIVE
     if standby == "HOLD":
-        return M.MAV_STATE_STANDBY if node.vehicle.mode_name(s.mode) == "HOLD" else M.MAV_STATE_ACTIVE
+        return M.MAV_STATE_STANDBY if ctx.vehicle.mode_name(s.mode) == "HOLD" else M.MAV_STATE_ACTIVE
     return M.MAV_STATE_ACTIVE if s.armed else M.MAV_STATE_STANDBY

@@ -38,16 +38,16 @@ def motor_of_output(get, n: int) -> int | None:
     return None
 
 
-def copter_motor_pwm(node, n: int) -> int | None:
+def copter_motor_pwm(ctx, n: int) -> int | None:
     """SERVO_OUTPUT_RAW for output n if it is a motor output (None: not a motor)."""
-    get = node.params.get
+    get = ctx.params.get
     motor = motor_of_output(get, n)
     if motor is None:
         return None
     if motor > motor_count(get):
         return 0
     lo, hi = pwm_range(get)
-    s = node.state
+    s = ctx.state
     if not s.armed:
         return int(lo)
     throttle = max(0.0, min(1.0, s.throttle_pct / 100.0))
@@ -61,21 +61,21 @@ def copter_motor_pwm(node, n: int) -> int | None:
 THROTTLE_FUNCTIONS = frozenset({70, 73, 74})
 
 
-def _throttle_pwm(node, n: int, centred: bool) -> int | None:
-    get = node.params.get
+def _throttle_pwm(ctx, n: int, centred: bool) -> int | None:
+    get = ctx.params.get
     if int(get(f"SERVO{n}_FUNCTION")) not in THROTTLE_FUNCTIONS:
         return None
     lo, hi = get(f"SERVO{n}_MIN"), get(f"SERVO{n}_MAX")
     start = get(f"SERVO{n}_TRIM") if centred else lo
-    throttle = max(0.0, min(1.0, node.state.throttle_pct / 100.0)) if node.state.armed else 0.0
+    throttle = max(0.0, min(1.0, ctx.state.throttle_pct / 100.0)) if ctx.state.armed else 0.0
     if get(f"SERVO{n}_REVERSED"):
         return int(start - (start - lo) * throttle) if centred else int(hi - (hi - lo) * throttle)
     return int(start + (hi - start) * throttle)
 
 
-def plane_throttle_pwm(node, n: int) -> int | None:
-    return _throttle_pwm(node, n, centred=False)
+def plane_throttle_pwm(ctx, n: int) -> int | None:
+    return _throttle_pwm(ctx, n, centred=False)
 
 
-def rover_throttle_pwm(node, n: int) -> int | None:
-    return _throttle_pwm(node, n, centred=True)
+def rover_throttle_pwm(ctx, n: int) -> int | None:
+    return _throttle_pwm(ctx, n, centred=True)

@@ -32,35 +32,35 @@ BIT_SWITCH = 2048
 LOW_BATTERY_PCT = 10
 
 
-def _enabled(node, bit: int) -> bool:
-    mask = int(node.params.get("ARMING_CHECK"))
+def _enabled(ctx, bit: int) -> bool:
+    mask = int(ctx.params.get("ARMING_CHECK"))
     return mask & ALL or mask & bit
 
 
-def angle_max(node) -> list[str]:
-    if not _enabled(node, BIT_PARAMETERS):
+def angle_max(ctx) -> list[str]:
+    if not _enabled(ctx, BIT_PARAMETERS):
         return []
-    return [] if 1000 <= node.params.get("ANGLE_MAX") <= 8000 else ["Check ANGLE_MAX"]
+    return [] if 1000 <= ctx.params.get("ANGLE_MAX") <= 8000 else ["Check ANGLE_MAX"]
 
 
-def gps(node) -> list[str]:
-    if not _enabled(node, BIT_GPS):
+def gps(ctx) -> list[str]:
+    if not _enabled(ctx, BIT_GPS):
         return []
-    s = node.state
+    s = ctx.state
     if s.gps_fix_type < 3:
         return ["Need 3D Fix"]
-    if "GPS_HDOP_GOOD" not in node.params:  # ArduCopter's; the other types have no HDOP check
+    if "GPS_HDOP_GOOD" not in ctx.params:  # ArduCopter's; the other types have no HDOP check
         return []
-    limit = node.params.get("GPS_HDOP_GOOD") / 100.0
+    limit = ctx.params.get("GPS_HDOP_GOOD") / 100.0
     if s.hdop > limit:
         return [f"High GPS HDOP ({s.hdop:.2f} > {limit:.2f})"]
     return []
 
 
-def battery(node) -> list[str]:
-    if not _enabled(node, BIT_BATTERY) or ("BATT_MONITOR" in node.params and node.params.get("BATT_MONITOR") == 0):
+def battery(ctx) -> list[str]:
+    if not _enabled(ctx, BIT_BATTERY) or ("BATT_MONITOR" in ctx.params and ctx.params.get("BATT_MONITOR") == 0):
         return []  # no battery monitor, no battery checks
-    p, s = node.params.get, node.state
+    p, s = ctx.params.get, ctx.state
     out = []
     if p("BATT_ARM_VOLT") > 0 and s.battery_voltage_v < p("BATT_ARM_VOLT"):
         out.append(f"Battery below minimum arming voltage ({s.battery_voltage_v:.1f}V)")
@@ -68,15 +68,15 @@ def battery(node) -> list[str]:
         out.append("Battery below minimum arming capacity")
     if s.battery_remaining_pct < LOW_BATTERY_PCT:
         out.append(f"Battery below minimum ({s.battery_remaining_pct}%)")
-    if "BATT_LOW_VOLT" in node.params and 0 < p("BATT_LOW_VOLT") and s.battery_voltage_v < p("BATT_LOW_VOLT"):
+    if "BATT_LOW_VOLT" in ctx.params and 0 < p("BATT_LOW_VOLT") and s.battery_voltage_v < p("BATT_LOW_VOLT"):
         out.append(f"Battery 1 low voltage failsafe ({s.battery_voltage_v:.1f}V)")
     return out
 
 
-def rc_calibration(node) -> list[str]:
-    if not _enabled(node, BIT_RC):
+def rc_calibration(ctx) -> list[str]:
+    if not _enabled(ctx, BIT_RC):
         return []
-    p = node.params.get
+    p = ctx.params.get
     out = []
     for n in range(1, 5):
         lo, hi, trim = p(f"RC{n}_MIN"), p(f"RC{n}_MAX"), p(f"RC{n}_TRIM")
@@ -89,9 +89,9 @@ def rc_calibration(node) -> list[str]:
     return out
 
 
-def _compasses_in_use(node) -> list[int]:
+def _compasses_in_use(ctx) -> list[int]:
     """Compass indices with a device (COMPASS_DEV_IDn != 0) used for yaw (COMPASS_USEn)."""
-    params = node.params
+    params = ctx.params
     out = []
     for i, suffix in enumerate(("", "2", "3")):
         dev, use = f"COMPASS_DEV_ID{suffix}", f"COMPASS_USE{suffix}"
@@ -104,15 +104,15 @@ def _compasses_in_use(node) -> list[int]:
     return out
 
 
-def compass(node) -> list[str]:
+def compass(ctx) -> list[str]:
     """ArduPilot's compass checks: a compass in use with all-zero offsets was never calibrated
     ("Compass not calibrated", what a fresh board says until the compass calibration ran), and
     offsets beyond COMPASS_OFFS_MAX are too high."""
-    if not _enabled(node, BIT_COMPASS):
+    if not _enabled(ctx, BIT_COMPASS):
         return []
-    p = node.params.get
-    limit = p("COMPASS_OFFS_MAX") if "COMPASS_OFFS_MAX" in node.params else 1800
-    for i in _compasses_in_use(node):
+    p = ctx.params.get
+    limit = p("COMPASS_OFFS_MAX") if "COMPASS_OFFS_MAX" in ctx.params else 1800
+    for i in _compasses_in_use(ctx):
         suffix = "" if i == 0 else str(i + 1)
         offsets = [abs(p(f"COMPASS_OFS{suffix}_{axis}")) for axis in "XYZ"]
         if not any(offsets):
@@ -122,13 +122,13 @@ def compass(node) -> list[str]:
     return []
 
 
-def accelerometers(node) -> list[str]:
+def accelerometers(ctx) -> list[str]:
     """ArduPilot's accel_calibrated_ok_all: every accelerometer present (INS_ACCn_ID != 0) needs
     offsets that are not all zero and scales that are not zero, else "3D Accel calibration needed"
     (the accelerometer calibration writes them)."""
-    if not _enabled(node, BIT_INS):
+    if not _enabled(ctx, BIT_INS):
         return []
-    params = node.params
+    params = ctx.params
     for imu, prefix in ((1, "INS_ACC"), (2, "INS_ACC2"), (3, "INS_ACC3")):
         ident = "INS_ACC_ID" if imu == 1 else f"INS_ACC{imu}_ID"
         if ident not in params or not params.get(ident) or f"{prefix}OFFS_X" not in params:
@@ -140,23 +140,23 @@ def accelerometers(node) -> list[str]:
     return []
 
 
-def safety_switch(node) -> list[str]:
+def safety_switch(ctx) -> list[str]:
     """The safety switch is on (DO_SET_SAFETY_SWITCH_STATE 0: safe): the outputs are held off."""
-    if not _enabled(node, BIT_SWITCH):
+    if not _enabled(ctx, BIT_SWITCH):
         return []
-    on = any(getattr(service, "safety_on", False) for service in node.services)
+    on = ctx.state.safety_on
     return ["Hardware safety switch"] if on else []
 
 
-def fence(node) -> list[str]:
-    if "FENCE_ENABLE" not in node.params or not node.params.get("FENCE_ENABLE"):
+def fence(ctx) -> list[str]:
+    if "FENCE_ENABLE" not in ctx.params or not ctx.params.get("FENCE_ENABLE"):
         return []
-    p = node.params.get
+    p = ctx.params.get
     if p("FENCE_TYPE") & fence_check.CIRCLE and p("FENCE_MARGIN") >= p("FENCE_RADIUS"):
         return ["Fence: FENCE_MARGIN is not less than FENCE_RADIUS"]
-    if node.state.gps_fix_type < 3:
+    if ctx.state.gps_fix_type < 3:
         return ["Fence requires position"]
-    breach = fence_check.breaches(node.state, fence_check.FenceConfig.from_params(p), node.mission.fence.stored(),
+    breach = fence_check.breaches(ctx.state, fence_check.FenceConfig.from_params(p), ctx.plans.fence.stored(),
                                   ignore_min_alt=True)
     return [f"Fence: vehicle outside the {fence_check.describe(breach)}"] if breach else []
 
@@ -166,14 +166,14 @@ DRIVING_CHECKS = FLYING_CHECKS
 TRACKER_CHECKS = (gps, battery, compass)
 
 
-def prearm_failures(node) -> list[str]:
+def prearm_failures(ctx) -> list[str]:
     """Every failing check of the node's vehicle type (ARMING_CHECK 0: none)."""
-    if "ARMING_CHECK" not in node.params or node.params.get("ARMING_CHECK") == 0:
+    if "ARMING_CHECK" not in ctx.params or ctx.params.get("ARMING_CHECK") == 0:
         return []  # a type without ARMING_CHECK (AntennaTracker, a companion) has no arming checks
     failures: list[str] = []
-    for check in node.vehicle.prearm_checks:
-        failures += check(node)
-    backend_checks = getattr(node.sim, "backend_prearm_failures", None)
+    for check in ctx.vehicle.prearm_checks:
+        failures += check(ctx)
+    backend_checks = getattr(ctx.autopilot, "backend_prearm_failures", None)
     if backend_checks is not None:
         failures += backend_checks()
     return failures
