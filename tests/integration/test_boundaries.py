@@ -105,10 +105,10 @@ def test_a_raise_in_the_mqtt_callback_is_counted_and_the_link_lives_on(broker, d
                                                                        tmp_path):
     original = Channel.receive
 
-    def receive(self, peer, data, now, datagram=False):
+    def receive(self, peer, data, now, datagram=False, **kwargs):
         if bytes(data).startswith(b"BOOM"):
             raise RuntimeError("deliberately broken receive")
-        return original(self, peer, data, now, datagram)
+        return original(self, peer, data, now, datagram, **kwargs)
 
     monkeypatch.setattr(Channel, "receive", receive)
     topic = "gcsd/boundary"

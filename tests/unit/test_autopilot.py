@@ -334,7 +334,7 @@ def test_a_jump_loop_over_an_instant_nav_item_completes_one_item_per_step_and_ke
     assert 100 <= len(loops) <= 200 and set(loops) == {2}, "one completion per step, never a burst"
     assert h.node.errors.snapshot() == {}
     assert h.state.armed and abs(h.state.relative_alt_m - 10) < 1.0, "holding at the takeoff altitude"
-    assert h.node.mission.current_message().seq == 2
+    assert h.node.plans.current_message().seq == 2
 
 
 def test_instant_nav_items_in_a_finite_loop_take_turns_as_current_then_the_mission_goes_on(tmp_path):
