@@ -6,7 +6,8 @@ one vehicle's cost.
     python -m bench throughput latency   # just these; also: harness, vehicle, params, param_flood, mission,
                                          # signing, swarm, ftp, fleet (the MQTT fleet, bench/fleet.py),
                                          # lossy (mission upload time vs loss, bench/lossy.py),
-                                         # logs (flight-log download and capture, bench/logs.py)
+                                         # logs (flight-log download and capture, bench/logs.py),
+                                         # companion (filters and rate caps, bench/companion.py)
     python -m bench --routers mavproxy   # only some routers (default gcsd,mavlink-router,mavproxy)
 
 mavlink-router is the binary in $GCSD_MAVLINK_ROUTER (or mavlink-routerd on PATH); without it the
@@ -34,6 +35,7 @@ from pathlib import Path as FsPath
 if __package__ in (None, ""):  # run as a script: python bench/run.py
     sys.path.insert(0, str(FsPath(__file__).resolve().parent.parent))
 
+from bench import companion as bench_companion  # noqa: E402
 from bench import fleet as bench_fleet  # noqa: E402
 from bench import ftp as bench_ftp  # noqa: E402
 from bench import logs as bench_logs  # noqa: E402
@@ -63,7 +65,7 @@ from bench.routers import (  # noqa: E402
 )
 
 WHAT = ("harness", "throughput", "latency", "vehicle", "params", "param_flood", "mission", "signing", "swarm",
-        "ftp", "fleet", "lossy", "logs")
+        "ftp", "fleet", "lossy", "logs", "companion")
 ROUTERS = {"gcsd": "gcsd", "mavlink-router": "mavlink-router", "mavproxy": "MAVProxy"}  # name -> column
 LATENCY_RATE = 1000
 
@@ -273,6 +275,8 @@ class Runner:
             self.res["fleet"] = bench_fleet.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
         if "lossy" in a.what:  # bench/lossy.py: upload time vs loss, adaptive re-requests vs a fixed 1 s
             self.res["lossy"] = bench_lossy.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
+        if "companion" in a.what and "gcsd" in a.routers:  # bench/companion.py: filters and rate caps
+            self.res["companion"] = bench_companion.measure_gates(self)
         if "logs" in a.what:  # bench/logs.py: 10 MB log download, capture at 921 600 baud
             self.res["logs"] = bench_logs.measure(self.workdir / "logs", self.a.quick, getattr(self, "gcsd_env", None))
 
@@ -470,6 +474,8 @@ class Runner:
             out += ["", bench_fleet.table(self.res["fleet"])]
         if self.res.get("lossy"):
             out += ["", bench_lossy.table(self.res["lossy"])]
+        if self.res.get("companion"):
+            out += ["", bench_companion.table(self.res["companion"])]
         if self.res.get("logs"):
             out += ["", "Flight logs: 10 MB log download (LOG_REQUEST_DATA), capture at 921 600 baud (bench/logs.py)",
                     "", bench_logs.table(self.res["logs"])]

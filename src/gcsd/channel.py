@@ -340,7 +340,7 @@ class Channel:
         """Send raw bytes to every peer, if the budget allows; False (and a counted drop) if not.
         filter.out or a rate cap may hold it back (counted by the gate; not a failure of the link)."""
         gate = self.out_gate
-        if gate is not None and self.peers and not gate.allow(raw, self.clock()):
+        if gate is not None and self.peers and not gate.allow(raw, self.clock):
             return True
         return self._write(raw, None)
 
@@ -375,7 +375,7 @@ class Channel:
         if not peers:
             return True
         gate = self.out_gate  # once per message, whatever number of versions it is encoded in
-        if gate is not None and not gate.allow_header(msg.get_msgId(), sysid, compid, self.clock()):
+        if gate is not None and not gate.allow_key(msg.get_msgId() << 16 | sysid << 8 | compid, self.clock):
             return True
         v1 = self._v1_peers
         if v1 == 0:

@@ -8,8 +8,10 @@ memoised in a dict keyed by one integer, so the steady state costs one dict look
 the memo holds at most MEMO_MAX answers and is cleared when full.
 
 `InGate.allow(frame)`: after the signature check, before routing and local handling.
-`OutGate.allow(raw, now)`: everything written to the channel, forwarded or our own: the out
-filter, then the rate caps (ratecap.py). The header is read from the raw bytes (MAVLink1 or 2).
+`OutGate.allow(raw, clock)`: everything written to the channel, forwarded or our own: the out
+filter, then the rate caps (ratecap.py), memoised together as one verdict per (msgid, sysid,
+compid), so a frame costs one header read and one dict lookup (the clock is read only for a
+capped message). The header is read from the raw bytes (MAVLink1 or 2).
 A channel with neither filter nor caps has no gate at all (`None`), so it pays nothing.
 Counters: `filtered` (each gate), `RateCaps.limited`.
 """
@@ -47,11 +49,14 @@ class FrameFilter:
         self._memo: dict[int, bool] = {}
 
     def passes(self, msgid: int, sysid: int, compid: int) -> bool:
-        key = msgid << 16 | sysid << 8 | compid
+        return self.passes_key(msgid << 16 | sysid << 8 | compid)
+
+    def passes_key(self, key: int) -> bool:
+        """`key` is msgid << 16 | sysid << 8 | compid."""
         answer = self._memo.get(key)
         if answer is None:
-            fields = {16: msgid, 8: sysid, 0: compid}
-            answer = all((fields[shift] in values) == allow for shift, values, allow in self._tests)
+            answer = all((((key >> shift) & (0xFFFFFF if shift == 16 else 0xFF)) in values) == allow
+                         for shift, values, allow in self._tests)
             if len(self._memo) >= MEMO_MAX:
                 self._memo.clear()
             self._memo[key] = answer
@@ -59,36 +64,63 @@ class FrameFilter:
 
 
 class InGate:
-    __slots__ = ("_filter", "filtered")
+    __slots__ = ("_memo", "_passes", "filtered")
 
     def __init__(self, rules: FilterRules) -> None:
-        self._filter = FrameFilter(rules)
+        f = FrameFilter(rules)
+        self._memo, self._passes = f._memo, f.passes_key
         self.filtered = 0
 
     def allow(self, frame) -> bool:
-        if self._filter.passes(frame.msgid, frame.sysid, frame.compid):
-            return True
-        self.filtered += 1
-        return False
+        key = frame.msgid << 16 | frame.sysid << 8 | frame.compid
+        answer = self._memo.get(key)
+        if answer is None:
+            answer = self._passes(key)
+        if not answer:
+            self.filtered += 1
+        return answer
 
 
 class OutGate:
-    __slots__ = ("_filter", "caps", "filtered")
+    """filter.out and the rate caps as one memoised verdict per (msgid, sysid, compid): True
+    (passes), False (filtered) or the cap's period (the rate cap decides, with the clock)."""
+
+    __slots__ = ("_filter", "_verdicts", "caps", "filtered")
 
     def __init__(self, rules: FilterRules, caps: RateCaps) -> None:
         self._filter = None if rules.empty else FrameFilter(rules)
         self.caps = caps
+        self._verdicts: dict[int, bool | float] = {}
         self.filtered = 0
 
-    def allow(self, raw: bytes, now: float) -> bool:
-        msgid, sysid, compid = header(raw)
-        return self.allow_header(msgid, sysid, compid, now)
+    def allow(self, raw: bytes, clock) -> bool:
+        """A whole frame about to be written; `clock()` is read only for a capped message."""
+        if raw[0] == STX_V2:
+            return self.allow_key((raw[7] | raw[8] << 8 | raw[9] << 16) << 16 | raw[5] << 8 | raw[6], clock)
+        return self.allow_key(raw[5] << 16 | raw[3] << 8 | raw[4], clock)
 
-    def allow_header(self, msgid: int, sysid: int, compid: int, now: float) -> bool:
-        if self._filter is not None and not self._filter.passes(msgid, sysid, compid):
+    def allow_key(self, key: int, clock) -> bool:
+        """`key` is msgid << 16 | sysid << 8 | compid (our own messages: before they are encoded)."""
+        verdict = self._verdicts.get(key)
+        if verdict is None:
+            verdict = self._verdict(key)
+        if verdict is True:
+            return True
+        if verdict is False:
             self.filtered += 1
             return False
-        return self.caps.allow(msgid, sysid, compid, now)
+        return self.caps.allow_key(key, verdict, clock())
+
+    def _verdict(self, key: int) -> bool | float:
+        if self._filter is not None and not self._filter.passes_key(key):
+            verdict = False
+        else:
+            period = self.caps.period_s(key >> 16)
+            verdict = True if period is None else period
+        if len(self._verdicts) >= MEMO_MAX:
+            self._verdicts.clear()
+        self._verdicts[key] = verdict
+        return verdict
 
 
 def gates(config: ChannelConfig) -> tuple[InGate | None, OutGate | None]:

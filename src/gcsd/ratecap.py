@@ -35,11 +35,16 @@ class RateCaps:
     def __bool__(self) -> bool:
         return bool(self._period_s)
 
+    def period_s(self, msgid: int) -> float | None:
+        """The cap's period for a message id; None: not capped."""
+        return self._period_s.get(msgid)
+
     def allow(self, msgid: int, sysid: int, compid: int, now: float) -> bool:
         period = self._period_s.get(msgid)
-        if period is None:
-            return True
-        key = msgid << 16 | sysid << 8 | compid
+        return True if period is None else self.allow_key(msgid << 16 | sysid << 8 | compid, period, now)
+
+    def allow_key(self, key: int, period: float, now: float) -> bool:
+        """One frame of a capped message; `key` is msgid << 16 | sysid << 8 | compid."""
         schedule = self._next_s
         next_s = schedule.get(key)
         if next_s is not None and now < next_s - SLACK_S:

@@ -46,8 +46,9 @@ MARKDOWN = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md")), *sorted((
 HEADERS = [*sorted((REPO / "sitl").glob("*.yaml")), REPO / "sitl" / "embed_robot.py",
            REPO / "systemd" / "gcsd.service", REPO / "config" / "gcsd.yaml"]
 PROGRAMS = ("gcsd", "mavproxy.py", "python", "python3", "pip", "systemctl", "journalctl", "useradd",
-            "install", "ln", "apt-get")
-ADMIN = ("pip", "systemctl", "journalctl", "useradd", "install", "ln", "apt-get")  # not run: files checked
+            "install", "ln", "apt-get", "kill")
+# not run: files checked (kill: the unit's ExecReload, SIGHUP to the daemon; tests/integration/test_companion_live.py)
+ADMIN = ("pip", "systemctl", "journalctl", "useradd", "install", "ln", "apt-get", "kill")
 API_PORT = 14551  # the default configuration's udp-server (README "Connect a ground station")
 START_TIMEOUT_S = 15.0
 

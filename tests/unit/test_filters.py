@@ -45,8 +45,9 @@ def test_the_out_gate_filters_then_caps():
                       "filter: {out: {block_src_sys: [9]}}, rate_limits: {ATTITUDE: 10}}]").channels[0]
     inbound, outbound = gates(ch)
     assert inbound is None
-    assert not outbound.allow(attitude(9), 0.0) and outbound.filtered == 1
-    assert outbound.allow(attitude(1), 0.0) and not outbound.allow(attitude(1), 0.05)
+    assert not outbound.allow(attitude(9), lambda: 0.0) and outbound.filtered == 1
+    assert outbound.allow(attitude(1), lambda: 0.0) and not outbound.allow(attitude(1), lambda: 0.05)
+    assert outbound.allow(attitude(1, mavlink1=True), lambda: 0.5)  # MAVLink1, the same source and cap
     assert outbound.caps.limited == 1 and outbound.filtered == 1
 
 
