@@ -8,11 +8,11 @@ import os
 import socket
 import termios
 import time
-import tty
 
 import pytest
 
 from .helpers import VEHICLE, M, from_vehicle, packed, read_fd, udp_channel, udp_url, wait_for
+from .test_serial import Pty
 
 FC = (7, 1)
 HEARTBEAT = M.MAVLink_heartbeat_message(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 0, 3)
@@ -84,45 +84,36 @@ def test_a_name_that_does_not_resolve_is_retried_and_stops_nothing(daemon, clien
 
 # --- serial devices that come back ------------------------------------------------------------
 
-class Pty:
-    """A PTY pair whose slave is reachable through a by-id style symlink the test controls."""
+class LinkedPty(Pty):
+    """test_serial's PTY pair (frames sent as the flight controller), its slave reachable through a
+    by-id style symlink the test controls."""
 
     def __init__(self, link: str) -> None:
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.slave)
-        os.set_blocking(self.master, False)
+        super().__init__()
         self.link = link
-        os.symlink(os.ttyname(self.slave), link)
-        self.raw = bytearray()
+        os.symlink(self.path, link)
 
     def send(self, msg) -> None:
         os.write(self.master, packed(msg, *FC))
-
-    def read(self, seconds: float) -> None:
-        read_fd(self.master, seconds, self.raw)
 
     def speed(self) -> int:
         return termios.tcgetattr(self.slave)[5]  # ospeed, as the daemon set it
 
     def remove(self) -> None:
         os.unlink(self.link)
-        for fd in (self.master, self.slave):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
+        self.close()
 
 
 @pytest.fixture
 def ptys():
-    made: list[Pty] = []
+    made: list[LinkedPty] = []
     yield made
     for p in made:
         if os.path.lexists(p.link):
             p.remove()
 
 
-def _answered(p: Pty, timeout_s: float) -> bool:
+def _answered(p: LinkedPty, timeout_s: float) -> bool:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         p.send(HEARTBEAT)
@@ -134,19 +125,19 @@ def _answered(p: Pty, timeout_s: float) -> bool:
 
 def test_a_serial_device_removed_and_recreated_under_the_same_link_is_opened_again(daemon, ptys, tmp_path):
     link = str(tmp_path / "usb-ArduPilot_fmuv3-if00")
-    ptys.append(Pty(link))
+    ptys.append(LinkedPty(link))
     d = daemon({"channels": [{"name": "fc", "type": "serial", "device": link}, udp_channel("gcs")]})
     assert _answered(ptys[0], 3.0)
     ptys[0].remove()  # unplugged: the link goes, the device goes
     assert _poll(lambda: _channel(d, "fc")["peers"] == 0, 5.0), "the daemon never saw the device go"
-    ptys.append(Pty(link))  # plugged in again: a new tty behind the same link
+    ptys.append(LinkedPty(link))  # plugged in again: a new tty behind the same link
     assert _answered(ptys[1], 10.0), "the device was not opened again"
     assert _channel(d, "fc")["peers"] == 1
 
 
 def test_a_baud_list_is_cycled_until_a_good_frame_and_then_kept(daemon, ptys, tmp_path):
     link = str(tmp_path / "usb-radio")
-    p = Pty(link)
+    p = LinkedPty(link)
     ptys.append(p)
     daemon({"channels": [{"name": "fc", "type": "serial", "device": link, "baud": [921600, 57600]}]})
     assert p.speed() == termios.B921600

@@ -24,9 +24,9 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator
 
 import pytest
 import yaml
@@ -374,6 +374,18 @@ def mavproxy_script() -> str:
     if script is None:
         pytest.skip("mavproxy.py is not on PATH")
     return script
+
+
+def mavproxy_for_params(spawn, port: int, cwd: Path) -> SpawnedProcess:
+    """MAVProxy with its param module alone (FTP off), a ground station of vehicle 1:1 on
+    udpout:127.0.0.1:PORT, once it has detected the vehicle."""
+    mavproxy = spawn(
+        [sys.executable, mavproxy_script(), f"--master=udpout:127.0.0.1:{port}", "--no-state",
+         "--target-system=1", "--target-component=1", "--default-modules=param", "--cmd=set param_ftp 0"],
+        name="mavproxy", cwd=cwd, env_overrides={"HOME": str(cwd)},
+    )
+    assert mavproxy.output.wait_for(re.compile(r"Detected vehicle 1:1"), 15.0) is not None, mavproxy.describe()
+    return mavproxy
 
 
 def expect_line(process: SpawnedProcess, daemon, pattern: str, timeout_s: float, since: int, what: str):

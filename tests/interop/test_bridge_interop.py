@@ -9,7 +9,6 @@ one; a pymavlink ground station on `gcs2` reads the new value back from the flig
 from __future__ import annotations
 
 import re
-import sys
 import time
 
 import pytest
@@ -18,7 +17,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from integration.bridge import NullModem, bridge_configs
 
-from .conftest import mavproxy_script
+from .conftest import mavproxy_for_params
 
 pytest.importorskip("MAVProxy", reason="MAVProxy is a test extra: pip install -e .[test]")
 pytestmark = pytest.mark.interop
@@ -53,12 +52,7 @@ def test_mavproxy_fetches_and_sets_flight_controller_parameters_through_the_comp
         daemons.append(companion)
         before = read_fc(companion.port("gcs2"), "RC8_TRIM")
         assert before is not None, "the flight controller answers through the bridge"
-        mavproxy = spawn(
-            [sys.executable, mavproxy_script(), f"--master=udpout:127.0.0.1:{companion.port('gcs1')}", "--no-state",
-             "--target-system=1", "--target-component=1", "--default-modules=param", "--cmd=set param_ftp 0"],
-            name="mavproxy", cwd=tmp_path, env_overrides={"HOME": str(tmp_path)},
-        )
-        assert mavproxy.output.wait_for(re.compile(r"Detected vehicle 1:1"), 15.0) is not None, mavproxy.describe()
+        mavproxy = mavproxy_for_params(spawn, companion.port("gcs1"), tmp_path)
         mark = len(mavproxy.output)
         mavproxy.send_line("param fetch")
         # MAVProxy fetches the list of every component it detects (the companion's too); the

@@ -14,13 +14,12 @@ from __future__ import annotations
 import re
 import select
 import socket
-import sys
 import threading
 import time
 
 import pytest
 
-from .conftest import mavproxy_script
+from .conftest import mavproxy_for_params
 from .test_bridge_interop import read_fc
 
 pytestmark = pytest.mark.interop
@@ -148,12 +147,7 @@ async def test_mavsdk_arms_and_disarms_through_a_companion_with_filters_and_a_gr
 def test_mavproxy_fetches_and_sets_parameters_through_a_companion_with_filters_and_a_group(companion, spawn,
                                                                                            tmp_path):
     hub, relay = companion
-    mavproxy = spawn(
-        [sys.executable, mavproxy_script(), f"--master=udpout:127.0.0.1:{hub.port('gcs')}", "--no-state",
-         "--target-system=1", "--target-component=1", "--default-modules=param", "--cmd=set param_ftp 0"],
-        name="mavproxy", cwd=tmp_path, env_overrides={"HOME": str(tmp_path)},
-    )
-    assert mavproxy.output.wait_for(re.compile(r"Detected vehicle 1:1"), 15.0) is not None, mavproxy.describe()
+    mavproxy = mavproxy_for_params(spawn, hub.port("gcs"), tmp_path)
     mark = len(mavproxy.output)
     mavproxy.send_line("param fetch")
     got = mavproxy.output.wait_for(re.compile(r"Received (\d{3,}) parameters"), 30.0, since=mark)
