@@ -32,6 +32,7 @@ from .autopilot.core import Autopilot
 from .channel import Channel
 from .config import ChannelConfig, Config
 from .config_mqtt import route_capacity
+from .logs.wiring import flight_log_service, log_dir
 from .node import VehicleNode
 from .params import ParamStore
 from .persist import WriteBehind
@@ -74,6 +75,14 @@ OVERRIDES: dict[tuple[str, int | str], tuple[str, str]] = {
 }
 
 
+# (MESSAGE, name) -> services that all handle it, called in this order: a message more than one
+# service must see. Anything else registered twice is an override (above) or an error.
+SHARED: dict[tuple[str, int | str], tuple[str, ...]] = {
+    # the control service's GCS presence, the flight logs' flight controllers (capture)
+    (MESSAGE, "HEARTBEAT"): ("control", "logs"),
+}
+
+
 class DuplicateRegistration(Exception):
     """A message or command id registered by two services without an entry in OVERRIDES."""
 
@@ -100,6 +109,12 @@ class Registry:
 
     def _put(self, kind: str, key: int | str, handler: Callable, name: str, table: dict) -> None:
         prev = self.owner.get((kind, key))
+        shared = SHARED.get((kind, key), ())
+        if prev is not None and name in shared and prev.split("+")[-1] in shared[:shared.index(name)]:
+            first = table[key]
+            table[key] = lambda inc, first=first, then=handler: (first(inc), then(inc))
+            self.owner[(kind, key)] = f"{prev}+{name}"
+            return
         if prev is not None:
             rule = self.overrides.get((kind, key))
             if rule == (prev, name):
@@ -147,8 +162,10 @@ SERVICES: tuple[tuple[str, Callable[[VehicleNode, Wiring], object]], ...] = (
     ("highlatency", lambda node, w: HighLatencyService(node)),
     ("serialcontrol", _serial_control),
     ("ftp", lambda node, w: FtpService(node, node.state_dir / w.config.ftp.root, w.config.ftp.max_file_bytes,
-                                       w.services["params"], w.services["mission"])),
+                                       w.services["params"], w.services["mission"],
+                                       {"logs": log_dir(node.state_dir, w.config)})),
     ("signing", lambda node, w: SigningService(node, w.signing)),
+    ("logs", lambda node, w: flight_log_service(node, w.config)),
 )
 
 

@@ -12,9 +12,9 @@
   (header, banner, parameters, mode); while armed and DISARMED_TAIL_S after disarming, samples
   are appended at the recorder's rate (`tick`, run from the send passes: its deadline is the
   next sample); then the file is finished off the loop (fsync).
-- **Capture** (capture.py; `capture`, node 0 only): HEARTBEAT and SYSTEM_TIME of flight
-  controllers (`observe`, called for every frame routed to the node) and REMOTE_LOG_DATA_BLOCK
-  addressed to us go to the core; its REMOTE_LOG_BLOCK_STATUS answers are sent on the flight
+- **Capture** (capture.py; `capture`, node 0 only): HEARTBEAT (shared with the control service,
+  compose.SHARED) and SYSTEM_TIME of flight controllers and REMOTE_LOG_DATA_BLOCK addressed to
+  us go to the core; its REMOTE_LOG_BLOCK_STATUS answers are sent on the flight
   controller's channel at once, its writes go to the store. A block that cannot be written
   (min_free_mb reached and nothing left to rotate) is counted in `write_refused` and still ACKed.
 
@@ -230,16 +230,17 @@ class FlightLogService(Service):
             log.error("flight_log_write_failed", file=f.name, error=str(exc))
 
     # --- capture ---------------------------------------------------------------------------
-    def observe(self, channel, frame, now: float) -> None:
-        """Every frame routed to this node: flight controllers' HEARTBEAT and SYSTEM_TIME."""
+    def handle_HEARTBEAT(self, inc: Incoming) -> None:
+        """Shared with the control service (compose.SHARED): a flight controller's heartbeat."""
         if self.capture is None:
             return
-        if frame.msgid == M.MAVLINK_MSG_ID_HEARTBEAT:
-            self._capture_channels[channel.index] = channel
-            m = frame.msg
-            self._apply(self.capture.handle_heartbeat(channel.index, frame.sysid, frame.compid, m.autopilot, now), now)
-        elif frame.msgid == M.MAVLINK_MSG_ID_SYSTEM_TIME:
-            self._apply(self.capture.handle_system_time(frame.sysid, frame.msg.time_boot_ms, now), now)
+        self._capture_channels[inc.channel.index] = inc.channel
+        self._apply(self.capture.handle_heartbeat(inc.channel.index, inc.frame.sysid, inc.frame.compid,
+                                                  inc.msg.autopilot, inc.now), inc.now)
+
+    def handle_SYSTEM_TIME(self, inc: Incoming) -> None:
+        if self.capture is not None:
+            self._apply(self.capture.handle_system_time(inc.frame.sysid, inc.msg.time_boot_ms, inc.now), inc.now)
 
     def handle_REMOTE_LOG_DATA_BLOCK(self, inc: Incoming) -> None:
         if self.capture is None:
