@@ -51,6 +51,14 @@ def run(args: argparse.Namespace) -> int:
     if socket_path is None:
         print(f"gcsd channel: {problem}", file=sys.stderr)
         return EXIT_FAILURE
+    try:
+        return _act(args, socket_path)
+    except (OSError, ValueError) as exc:  # ValueError: no JSON answer
+        print(f"gcsd channel: the daemon at {socket_path} did not answer: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+
+
+def _act(args: argparse.Namespace, socket_path: Path) -> int:
     if args.action == "list":
         status = control.query(socket_path)
         if args.json:

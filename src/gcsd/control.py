@@ -49,9 +49,10 @@ REQUEST_WAIT_S = 2.0
 _MAV_TYPE_PREFIX = "MAV_TYPE_"
 
 
-async def serve(path: Path, snapshot, commands: dict | None = None) -> asyncio.AbstractServer:
+async def serve(path: Path, snapshot, commands: dict | None = None, on_error=None) -> asyncio.AbstractServer:
     """`snapshot()` answers status; `commands[name](request)` (a coroutine returning None or an
-    error line) answers the others."""
+    error line) answers the others. A command that raises is answered as failed and reported to
+    `on_error()` (the daemon's ErrorCounts), never left without an answer."""
     if _answers(path):  # another daemon's: never taken over (its `gcsd status` would go dark)
         raise OSError(errno.EADDRINUSE, f"another daemon answers on {path}")
     path.unlink(missing_ok=True)  # left behind by a daemon that was killed
@@ -66,7 +67,12 @@ async def serve(path: Path, snapshot, commands: dict | None = None) -> asyncio.A
             elif handler is None:
                 reply = {"ok": False, "error": f"unknown request {request.get('cmd')!r}"}
             else:
-                error = await handler(request)
+                try:
+                    error = await handler(request)
+                except Exception:
+                    if on_error is not None:
+                        on_error(request.get("cmd"))
+                    error = "the daemon failed to do it (its log has the traceback)"
                 reply = {"ok": error is None, "error": error}
             writer.write(json.dumps(reply, default=str).encode() + b"\n")
             await writer.drain()

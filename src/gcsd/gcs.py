@@ -258,7 +258,7 @@ class GCS:
             server = await control.serve(sock_path, self.status, {
                 "channel_add": lambda request: self.live.add(request.get("spec")),
                 "channel_remove": lambda request: self.live.remove(str(request.get("name"))),
-            })
+            }, lambda cmd: self.errors.failed(f"control:{cmd}", self.clock.now()))
         except OSError as exc:
             server = None
             log.error("control_socket_failed", path=str(sock_path), error=str(exc))

@@ -164,6 +164,25 @@ def test_sighup_reloads_the_channels_and_a_bad_file_changes_nothing(tmp_path, cl
         assert kept["packets_out"] > before["packets_out"]
         assert any(r["sysid"] == 255 and r["channel"] == "gcs" for r in after["routes"])
         assert _max_gap_s(station, mark) < GAP_LIMIT_S
+        before_reopen = _by_name(after)["new"]["packets_in"]
+
+        # a changed channel is reopened in its slot; the untouched one still sees no gap
+        mark = station.mark()
+        _write(conf, state, [gcs, {"name": "new", "type": "udp-server", "address": f"127.0.0.1:{new_port}",
+                                   "rate_limits": {"ATTITUDE": 1}}])
+        proc.send_signal(signal.SIGHUP)
+        deadline = time.monotonic() + 5
+        reopened = None
+        while time.monotonic() < deadline and reopened is None:
+            _keep_reading(station, 0.1)
+            reopened = _by_name(_status(sock)).get("new")
+            reopened = reopened if reopened is not None and reopened["packets_in"] < before_reopen else None
+        assert reopened is not None, "the changed channel was not reopened (its counters did not restart)"
+        newcomer.heartbeat()
+        assert wait_for(newcomer, from_vehicle, since=newcomer.mark(), others=[station]), "the reopened channel"
+        _keep_reading(station, 1.5)  # a window longer than the gap limit
+        assert _max_gap_s(station, mark) < GAP_LIMIT_S
+        assert _by_name(_status(sock))["gcs"]["peers"] == 1
 
         conf.write_text("channels: [{name: gcs, type: udp-server, address: nowhere}]\n")
         proc.send_signal(signal.SIGHUP)
@@ -180,5 +199,7 @@ def test_sighup_reloads_the_channels_and_a_bad_file_changes_nothing(tmp_path, cl
             proc.kill()
             out, _ = proc.communicate()
     assert proc.returncode == 0
+    reloads = [json.loads(line) for line in out.splitlines() if '"configuration_reloaded"' in line]
+    assert [(r["closed"], r["reopened"], r["opened"]) for r in reloads] == [(["old"], [], ["new"]), ([], ["new"], [])]
     refused = [json.loads(line) for line in out.splitlines() if '"reload_refused"' in line]
     assert [r["problem"] for r in refused] == [f"{conf}:1: channels[0].address: expected HOST:PORT, got 'nowhere'"]
