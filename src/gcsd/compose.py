@@ -177,9 +177,11 @@ def vehicle_state_dir(config: Config, index: int) -> Path:
 
 
 def build_vehicle(index: int, config: Config, clock, channels: list[Channel], wake: Callable[[Channel], None],
-                  errors, signing: SigningManager, backend=None, services=SERVICES,
-                  overrides=OVERRIDES, producers: dict | None = None) -> VehicleNode:
-    """One vehicle node with its parameters, autopilot, services and tables."""
+                  errors, signing: SigningManager, backend=None, services=None,
+                  overrides=None, producers: dict | None = None) -> VehicleNode:
+    """One vehicle node with its parameters, autopilot, services (SERVICES) and tables."""
+    services = SERVICES if services is None else services
+    overrides = OVERRIDES if overrides is None else overrides
     vcfg = config.vehicle
     vtype = vehicle_type(vcfg.type)
     state_dir = vehicle_state_dir(config, index)
@@ -218,6 +220,10 @@ def build_vehicle(index: int, config: Config, clock, channels: list[Channel], wa
     commands = CommandService(node, registry.commands)
     registry.add("commands", commands)
     built.append(commands)
+    for service in built:
+        for compid, table in service.local_components().items():
+            commands.add_component(compid, table)
+            node.local_compids.append(compid)
     node.control = w.services["control"]
     node.plans = w.services["mission"]
     node.attach(built, registry.handlers)
@@ -261,8 +267,11 @@ def build(gcs, channels, backend=None, producers: dict | None = None) -> None:
                       gcs.signing_manager, backend=None if backend is None else backend(i), producers=producers)
         for i in range(config.vehicle.count)
     ]
-    gcs.router = Router({(n.sysid, n.compid) for n in gcs.nodes}, [ch.policy for ch in gcs.channels],
+    gcs.router = Router({(n.sysid, c) for n in gcs.nodes for c in (n.compid, *n.local_compids)},
+                        [ch.policy for ch in gcs.channels],
                         RouteTable(route_capacity((c.type for c in config.channels), MAX_ROUTES)))
+    # taps: every accepted frame, after signing, filters and loop checks, before routing
+    gcs.taps = [service.tap for n in gcs.nodes for service in n.services if hasattr(service, "tap")]
 
 
 def channel(gcs, index: int, config: ChannelConfig) -> Channel:

@@ -67,6 +67,7 @@ class GCS:
         self.ready = asyncio.Event()  # every server channel bound, every client channel tried
         self.bad_crc_forwarded = 0
         self._rates: dict[str, tuple[float, float]] = {}
+        self.taps: list = []  # tap(channel, frame, now) of every accepted frame (compose.py)
         self.loops = RecentFrames(LOOP_WINDOW_S)  # frames forwarded lately: one coming back is a loop
         # routing.dedup_ms: every frame; else the frames of redundant link groups, within LOOP_WINDOW_S
         dedup_ms = config.routing.dedup_ms
@@ -145,6 +146,9 @@ class GCS:
         if self.loops.seen(frame.raw, now):  # a frame we forwarded, back again: a loop (dedup.py)
             channel.stats.loop_dropped += 1
             return
+        if self.taps:
+            for tap in self.taps:
+                tap(channel, frame, now)
         msgid = frame.msgid
         if channel.index not in self.active and not is_radio(msgid):
             self.active.add(channel.index)

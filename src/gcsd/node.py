@@ -77,6 +77,7 @@ class VehicleNode:
         self._senders: list = []
         self._sim_component = "sim"
         self.registry = None  # compose.Registry: who registered which id
+        self.local_compids: list[int] = []  # other components of this system its services speak for
 
     def attach(self, services: list, handlers: dict[str, Callable[[Incoming], None]]) -> None:
         """The composition root's last step: the services and the message table built from them."""

@@ -33,6 +33,13 @@ class Service:
     def commands(self) -> dict[int, Callable]:
         return {}
 
+    def local_components(self) -> dict[int, dict[int, Callable]]:
+        """Other local components this service speaks for: compid -> their command table (the
+        camera at compid 100). The router then treats (sysid, compid) as local, and commands
+        addressed to it run from that table, ACKed from that compid. Its HEARTBEAT is the
+        service's to send (`pending`)."""
+        return {}
+
     def counters(self) -> dict[str, int]:
         """Counted events `gcsd status` shows (summed over a swarm's vehicles), e.g. drops."""
         return {}
