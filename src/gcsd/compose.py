@@ -241,15 +241,15 @@ def _wire_params(node: VehicleNode, config: Config, clock) -> None:
             if name not in params:  # a stream the vehicle type has no SRn_ parameter for
                 link.set_stream_rate(stream, link.channel.config.streams[stream], clock.now())
                 continue
-            link.set_stream_rate(stream, params.get(name), clock.now())
-            params.on_change(name, lambda _n, v, i=link.channel.index, stream=stream:
-                             node.links[i].set_stream_rate(stream, v, clock.now()))
+            link.set_stream_rate(stream, params.clamped(name), clock.now())  # beyond its range: the bound
+            params.on_change(name, lambda n, _v, i=link.channel.index, stream=stream:
+                             node.links[i].set_stream_rate(stream, params.clamped(n), clock.now()))
     node.gcs_sysid = int(params.get("SYSID_MYGCS")) if "SYSID_MYGCS" in params else config.gcs.sysid
     node.enforce_gcs_sysid = (bool(params.get("SYSID_ENFORCE")) if "SYSID_ENFORCE" in params
                               else config.gcs.enforce_sysid)
     params.on_change("SYSID_MYGCS", lambda _n, v: setattr(node, "gcs_sysid", int(v)))
     params.on_change("SYSID_ENFORCE", lambda _n, v: setattr(node, "enforce_gcs_sysid", bool(v)))
-    params.on_change("BATT_CAPACITY", lambda _n, v: setattr(node.state, "capacity_mah", float(v)))
+    params.on_change("BATT_CAPACITY", lambda n, _v: setattr(node.state, "capacity_mah", float(params.clamped(n))))
 
 
 def build(gcs, channels, backend=None, producers: dict | None = None) -> None:

@@ -127,12 +127,26 @@ def test_read_only_write_is_refused_with_text_and_old_value(daemon, client):
     assert r.msg.param_value == old
 
 
-def test_out_of_range_value_is_refused(daemon, client):
+def test_a_value_outside_the_documented_range_is_stored_and_what_acts_on_it_copes(daemon, client):
+    """As ArduPilot (issue 17, item 12): QGroundControl's compass dialogue sets COMPASS_CAL_FIT 100,
+    ANGLE_MAX 9000 is stored and the pre-arm check reports it, a stream rate of 500 Hz acts as 50."""
     d = daemon({"channels": [udp_channel("gcs")]})
     c = client(udp_url(d.port("gcs")))
-    mark = set_param(c, "SR0_EXTRA1", 500.0)
-    assert wait_for(c, lambda r: r.type == "STATUSTEXT" and "out of range" in r.msg.text, since=mark)
-    assert read_param(c, "SR0_EXTRA1").param_value == 5.0
+    for name, value in (("COMPASS_CAL_FIT", 100.0), ("ANGLE_MAX", 9000.0), ("SR0_EXTRA1", 500.0)):
+        mark = set_param(c, name, value)
+        echo = wait_for(c, lambda r, name=name: r.type == "PARAM_VALUE" and param_name(r.msg) == name, since=mark)
+        assert echo is not None and echo.msg.param_value == value
+        assert read_param(c, name).param_value == value
+    mark = c.mark()
+    c.command_long(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    ack = wait_for(c, lambda r: r.type == "COMMAND_ACK" and r.msg.command == M.MAV_CMD_COMPONENT_ARM_DISARM, since=mark)
+    assert ack is not None and ack.msg.result == M.MAV_RESULT_FAILED
+    assert wait_for(c, lambda r: r.type == "STATUSTEXT" and "PreArm: Check ANGLE_MAX" in r.msg.text, since=mark)
+    mark = c.mark()
+    pump([c], 2.0)
+    attitude = rate_hz(c.since(mark, "ATTITUDE"))  # SR0_EXTRA1's message
+    assert 25 <= attitude <= 60, f"ATTITUDE at {attitude:.1f} Hz: 500 acts as the documented 50"
+    assert d.status()["errors"] == {}
 
 
 @pytest.mark.parametrize("value", [math.nan, math.inf])

@@ -122,12 +122,14 @@ def test_every_set_loads_and_every_default_is_inside_its_range(vehicle):
         assert len(d.name) <= 16 and not (d.ptype == REAL32 and math.isnan(d.default)), d
 
 
-def test_a_documented_range_is_enforced_and_the_default_can_be_written_back():
+def test_a_value_outside_the_documented_range_is_stored_as_ardupilot_stores_it():
     store = served("copter")
     d = store.definition("ANGLE_MAX")
     assert (d.min, d.max, d.units) == (1000, 8000, "cdeg")  # ArduPilot 4.6's @Range and @Units
-    assert store.set("ANGLE_MAX", 9000.0) is SetResult.OUT_OF_RANGE
-    assert store.get("ANGLE_MAX") == 3000
+    assert store.set("ANGLE_MAX", 9000.0) is SetResult.CHANGED
+    assert (store.get("ANGLE_MAX"), store.clamped("ANGLE_MAX")) == (9000, 8000)
+    assert store.set("COMPASS_CAL_FIT", 100.0) is SetResult.CHANGED  # QGroundControl's compass dialogue
+    assert store.set("ANGLE_MAX", 3000.0) is SetResult.CHANGED
     assert store.set("MOT_SPIN_ARM", f32(0.2)) is SetResult.CHANGED  # the top of 0..0.2, as float32 sends it
     for entry in store.entries():  # QGroundControl's "reset to defaults" writes each default back
         if not store.definition(entry.name).read_only:

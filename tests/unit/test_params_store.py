@@ -63,15 +63,17 @@ def test_read_only_refuses_ground_station_writes_but_not_our_own():
     assert s.set("E_RO", 8.0, force=True) is SetResult.CHANGED
 
 
-def test_values_outside_the_documented_range_are_refused():
+def test_values_outside_the_documented_range_are_stored_and_clamped_where_they_act():
+    """As ArduPilot's GCS_Param.cpp: only NaN and infinity are refused; the range is advice."""
     s = store()
-    assert s.set("A_INT16", 2500.0) is SetResult.OUT_OF_RANGE
-    assert s.get("A_INT16") == 1500
+    assert s.set("A_INT16", 2500.0) is SetResult.CHANGED
+    assert s.get("A_INT16") == 2500
+    assert s.clamped("A_INT16") == s.definition("A_INT16").max
+    assert s.set("A_INT16", 1500.0) is SetResult.CHANGED
+    assert s.clamped("A_INT16") == 1500, "within the range: the value itself"
 
 
-def test_our_own_writes_are_not_held_to_the_documented_range():
-    """A calibration writes what it measured (ArduPilot documents COMPASS_OFS_X as -400..400 and
-    still stores a larger measured offset): force=True skips the range, never the C type."""
+def test_our_own_writes_are_held_to_the_c_type():
     s = store()
     assert s.set("A_INT16", 2500.0, force=True) is SetResult.CHANGED
     assert s.get("A_INT16") == 2500

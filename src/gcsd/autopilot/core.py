@@ -56,10 +56,10 @@ class Autopilot(Actions):
         self.params = ctx.params
         self.simulated = backend is None
         if backend is None and ctx.vehicle.dynamics is not None:
-            backend = SimulatedVehicle(ctx.vehicle.dynamics(), environment(ctx.params.get))
+            backend = SimulatedVehicle(ctx.vehicle.dynamics(), environment(ctx.params.clamped))
         self.backend = backend
-        self.speedup = float(self.params.get("SIM_SPEEDUP")) if "SIM_SPEEDUP" in self.params else speedup
-        self.period_s = 1.0 / float(self.params.get("SIM_RATE_HZ")) if "SIM_RATE_HZ" in self.params else DEFAULT_SIM_PERIOD_S
+        self.speedup = float(self.params.clamped("SIM_SPEEDUP")) if "SIM_SPEEDUP" in self.params else speedup
+        self.period_s = 1.0 / float(self.params.clamped("SIM_RATE_HZ")) if "SIM_RATE_HZ" in self.params else DEFAULT_SIM_PERIOD_S
         self._last_s = now
         self._dirty = True
         self._reload()
@@ -105,7 +105,7 @@ class Autopilot(Actions):
         self._dirty = True
 
     def _reload(self) -> None:
-        get = self.params.get
+        get = self.params.clamped  # a value outside its documented range acts as the nearest bound
         self.settings = self.vehicle.settings(get)
         self.limits = self.settings.limits
         if "SIM_SPEEDUP" in self.params:

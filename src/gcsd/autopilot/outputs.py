@@ -85,7 +85,7 @@ class Outputs:
             r.on = not r.on
             r.until_s += r.half_cycle_s
             if r.kind == "servo":
-                trim = int(self.params.get(f"SERVO{r.index}_TRIM"))
+                trim = int(self.params.clamped(f"SERVO{r.index}_TRIM"))
                 self.state.servo_override[r.index] = r.pwm if r.on else trim
             else:
                 self.state.relays[r.index] = not self.state.relays[r.index]

@@ -2,10 +2,11 @@
 
 Types are MAV_PARAM_TYPE INT8, INT16, INT32 and REAL32. Values travel as C-cast floats. A
 PARAM_SET value becomes an integer as AP_Param::set_float does: nudged by 0.01 away from zero,
-truncated, clamped to the type's range; a REAL32 is rounded to single precision. gcsd also
-enforces each parameter's documented range: a value outside it is refused (OUT_OF_RANGE), the
-old value stays and the caller tells the ground station why (ArduPilot leaves this to the GCS;
-a daemon whose parameters drive its behaviour should not accept SR0_EXTRA1 = 500).
+truncated, clamped to the type's range; a REAL32 is rounded to single precision. As in
+ArduPilot (GCS_Param.cpp refuses only NaN and infinity), a finite value outside the documented
+range (`min`/`max`, advice that ground stations show) is stored: what acts on a parameter clamps
+it where it acts, and the pre-arm checks report the dangerous ones ("PreArm: Check ANGLE_MAX").
+OUT_OF_RANGE is left for a REAL32 beyond single precision (from a file; the wire cannot carry one).
 
 Listeners registered with `on_change(name, fn)` run after a value changes, so changing a
 parameter changes behaviour at once (stream rates, GCS sysid, checks).
@@ -111,6 +112,17 @@ class ParamStore:
     def get(self, name: str) -> float | int:
         return self._values[self._index[name]]
 
+    def clamped(self, name: str) -> float | int:
+        """The value within its documented range: what the simulation acts on (the stored value
+        may lie outside it, as ArduPilot's may; the pre-arm checks read the stored one)."""
+        d = self._defs[self._index[name]]
+        value = self._values[self._index[name]]
+        if d.min is not None and value < d.min:
+            return d.min if d.ptype == REAL32 else int(d.min)
+        if d.max is not None and value > d.max:
+            return d.max if d.ptype == REAL32 else int(d.max)
+        return value
+
     def entry(self, index: int) -> ParamEntry | None:
         if not 0 <= index < len(self._defs):
             return None
@@ -129,8 +141,7 @@ class ParamStore:
         self._listeners.setdefault(name, []).append(fn)
 
     def set(self, name: str, value: float, force: bool = False) -> SetResult:
-        """Set from a ground station (force=True: from our own code: read-only allowed, and the
-        documented range not applied, as ArduPilot's calibrations write what they measured)."""
+        """Set from a ground station (force=True: from our own code: read-only allowed)."""
         index = self._index.get(name)
         if index is None:
             return SetResult.UNKNOWN
@@ -142,8 +153,6 @@ class ParamStore:
         if d.ptype == REAL32 and not fits_real32(value):  # from a file or a double, never from the wire
             return SetResult.OUT_OF_RANGE
         typed = to_type(d.ptype, value)
-        if not force and ((d.min is not None and typed < d.min) or (d.max is not None and typed > d.max)):
-            return SetResult.OUT_OF_RANGE  # our own writes (calibration results) are not held to the docs
         if typed == self._values[index]:
             return SetResult.UNCHANGED
         self._values[index] = typed

@@ -14,10 +14,12 @@
   While a list streams, the link's telemetry is slowed x4.
 - PARAM_REQUEST_READ by index (index >= 0) or by name (index -1) is answered at once on the
   requesting link; an unknown name or index gets no reply (as ArduPilot).
-- PARAM_SET: unknown names, NaN and infinity are ignored. Read-only parameters and values
-  outside the documented range are refused with a STATUSTEXT and the old value sent back to
-  the requester. A change is saved and confirmed with PARAM_VALUE on every active, non-private
-  channel. (PARAM_VALUE carries the parameter's real index; ArduPilot sends 65535 there.)
+- PARAM_SET: unknown names, NaN and infinity are ignored. Read-only parameters are refused
+  with a STATUSTEXT and the old value sent back to the requester. Any other finite value is
+  stored, also outside the documented range, as ArduPilot's GCS_Param.cpp does (the range is
+  advice for ground stations; what acts on a parameter clamps it, ParamStore.clamped, and the
+  pre-arm checks report the dangerous ones). A change is saved and confirmed with PARAM_VALUE
+  on every active, non-private channel. (PARAM_VALUE carries the parameter's real index; ArduPilot sends 65535 there.)
 - Persistence, write-behind: `mav.parm` in the vehicle's state directory holds the values that
   differ from their defaults. A change only marks the service dirty (`mark_dirty`, and the
   `on_dirty` hook tells the I/O adapter, gcsd.persist.WriteBehind). The file is due at
@@ -29,7 +31,7 @@
   later and reported once by STATUSTEXT. REAL32 values are written so they read back bit-exact
   (parmfile.format_real32). No clock is read here: `now` always comes from the caller.
 - At start: defaults, then `params_file`, then the saved file. A problem in `params_file` (a
-  bad line, an unknown name, a value out of its type's or its own range, NaN) is a bad
+  bad line, an unknown name, a value out of its type's range, NaN) is a bad
   configuration: `load` raises ConfigError with a ``FILE:LINE: NAME: what`` line for each, and
   the daemon does not start (exit 2) rather than run with half of an operator's settings. The
   daemon's own saved file is state, not configuration: unreadable lines there are logged with
@@ -48,7 +50,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..config import ConfigError
 from ..config_schema import DATAGRAM_TYPES
-from ..params import ParamEntry, ParamStore, SetResult, as_float, to_type
+from ..params import ParamEntry, ParamStore, SetResult, as_float
 from ..params.parmfile import format_parm, read_parm, read_parm_lines
 from ..params.store import REAL32, TYPE_RANGE, fits_real32
 from . import Incoming, Service
@@ -184,13 +186,8 @@ class ParamService(Service):
         if result in (SetResult.UNKNOWN, SetResult.INVALID):
             return
         entry = self.store.entry_by_name(name)
-        if result in (SetResult.READ_ONLY, SetResult.OUT_OF_RANGE):
-            d = self.store.definition(name)
-            if result is SetResult.READ_ONLY:
-                text = f"Param write denied ({name})"
-            else:
-                text = f"Param {name} out of range ({d.min:g}..{d.max:g})"
-            self.ctx.text(M.MAV_SEVERITY_WARNING, text, channels={inc.channel.index})
+        if result is SetResult.READ_ONLY:
+            self.ctx.text(M.MAV_SEVERITY_WARNING, f"Param write denied ({name})", channels={inc.channel.index})
             self.ctx.reply(inc.channel, self._value_msg(entry))
             return
         if result is SetResult.CHANGED:
@@ -250,12 +247,7 @@ def _file_value_problem(store: ParamStore, name: str, value: float) -> str | Non
     if d.ptype in TYPE_RANGE and not TYPE_RANGE[d.ptype][0] <= value <= TYPE_RANGE[d.ptype][1]:
         lo, hi = TYPE_RANGE[d.ptype]
         return f"{value:g} is out of range for its type ({lo}..{hi})"
-    typed = to_type(d.ptype, value)  # what ParamStore.set would store, and then check
-    if (d.min is not None and typed < d.min) or (d.max is not None and typed > d.max):
-        low = "" if d.min is None else f"{d.min:g}"
-        high = "" if d.max is None else f"{d.max:g}"
-        return f"{value:g} is outside its range ({low}..{high})"
-    return None
+    return None  # outside the documented range is fine: stored, as a PARAM_SET's value is
 
 
 def _name(raw) -> str:

@@ -149,7 +149,7 @@ def _servo_pwm(ctx, n: int) -> int:
         motor = ctx.vehicle.motor_pwm(ctx, n)
         if motor is not None:
             return motor
-    p = ctx.params.get
+    p = ctx.params.clamped
     lo, hi = p(f"SERVO{n}_MIN"), p(f"SERVO{n}_MAX")
     if p(f"SERVO{n}_FUNCTION") in MOTOR_FUNCTIONS:
         frac = ctx.state.throttle_pct / 100.0
@@ -167,7 +167,7 @@ def servo_output_raw(ctx, channel, now):
 def _rc_values(ctx, count: int) -> list[int]:
     """Each RC input at its RCn_TRIM (sticks at rest), or as RC_CHANNELS_OVERRIDE set it."""
     override = ctx.state.rc_override
-    return [override.get(n) or int(ctx.params.get(f"RC{n}_TRIM")) for n in range(1, count + 1)]
+    return [override.get(n) or int(ctx.params.clamped(f"RC{n}_TRIM")) for n in range(1, count + 1)]
 
 
 def rc_channels(ctx, channel, now):

@@ -40,7 +40,7 @@ def motor_of_output(get, n: int) -> int | None:
 
 def copter_motor_pwm(ctx, n: int) -> int | None:
     """SERVO_OUTPUT_RAW for output n if it is a motor output (None: not a motor)."""
-    get = ctx.params.get
+    get = ctx.params.clamped
     motor = motor_of_output(get, n)
     if motor is None:
         return None
@@ -62,7 +62,7 @@ THROTTLE_FUNCTIONS = frozenset({70, 73, 74})
 
 
 def _throttle_pwm(ctx, n: int, centred: bool) -> int | None:
-    get = ctx.params.get
+    get = ctx.params.clamped
     if int(get(f"SERVO{n}_FUNCTION")) not in THROTTLE_FUNCTIONS:
         return None
     lo, hi = get(f"SERVO{n}_MIN"), get(f"SERVO{n}_MAX")

@@ -151,13 +151,12 @@ def safety_switch(ctx) -> list[str]:
 def fence(ctx) -> list[str]:
     if "FENCE_ENABLE" not in ctx.params or not ctx.params.get("FENCE_ENABLE"):
         return []
-    p = ctx.params.get
-    if p("FENCE_TYPE") & fence_check.CIRCLE and p("FENCE_MARGIN") >= p("FENCE_RADIUS"):
+    config = fence_check.FenceConfig.from_params(ctx.params.get)  # Blimp 4.6 has no FENCE_TYPE: no circle
+    if config.types & fence_check.CIRCLE and config.margin_m >= config.radius_m:
         return ["Fence: FENCE_MARGIN is not less than FENCE_RADIUS"]
     if ctx.state.gps_fix_type < 3:
         return ["Fence requires position"]
-    breach = fence_check.breaches(ctx.state, fence_check.FenceConfig.from_params(p), ctx.plans.fence.stored(),
-                                  ignore_min_alt=True)
+    breach = fence_check.breaches(ctx.state, config, ctx.plans.fence.stored(), ignore_min_alt=True)
     return [f"Fence: vehicle outside the {fence_check.describe(breach)}"] if breach else []
 
 

@@ -54,7 +54,7 @@ def switch_position(pwm: int) -> int | None:
 def mapped_channel(params, index: int) -> int:
     """The RC channel of stick `index` (0 roll, 1 pitch, 2 throttle, 3 yaw): RCMAP_*, or 1..4."""
     name = STICKS[index]
-    channel = int(params.get(name)) if name in params else DEFAULT_MAP[index]
+    channel = int(params.clamped(name)) if name in params else DEFAULT_MAP[index]
     return channel if 1 <= channel <= 16 else DEFAULT_MAP[index]  # RCMAP_* 0 or wild: the default
 
 
@@ -98,22 +98,22 @@ class RcInput:
     rudder: tuple[str, float] | None = None  # "arm" / "disarm" held since
 
     def value(self, params, override: dict[int, int], n: int) -> int:
-        return override.get(n) or int(params.get(f"RC{n}_TRIM"))
+        return override.get(n) or int(params.clamped(f"RC{n}_TRIM"))
 
     def lost(self, params, override: dict[int, int]) -> bool:
         """RC is lost: overrides lapsed after being used, or throttle below the failsafe value."""
         if self.used and not override:
             return True
         names = failsafe_names(params)
-        if names is None or not params.get(names[0]):
+        if names is None or not params.clamped(names[0]):
             return False
         throttle = self.value(params, override, mapped_channel(params, 2))
-        return throttle < params.get(names[1])
+        return throttle < params.clamped(names[1])
 
     def sticks(self, params, override: dict[int, int]) -> tuple[float, float, float, float]:
         if not override:
             return (0.0, 0.0, 0.0, 0.0)
-        get = params.get
+        get = params.clamped
         out = []
         for index in range(4):
             n = mapped_channel(params, index)
@@ -126,11 +126,11 @@ class RcInput:
         names = mode_switch_names(params)
         if names is None or self.lost(params, override):
             return None
-        channel = int(params.get(names[0]))
+        channel = int(params.clamped(names[0]))
         if not 1 <= channel <= 16:
             return None
         if self.position is None:  # the switch at rest at start: reset_mode_switch, no change
-            self.position = switch_position(int(params.get(f"RC{channel}_TRIM")))
+            self.position = switch_position(int(params.clamped(f"RC{channel}_TRIM")))
         position = switch_position(self.value(params, override, channel))
         if position is None:
             return None
@@ -143,16 +143,16 @@ class RcInput:
         if now - self.pending[1] < SWITCH_DEBOUNCE_S:
             return None
         self.position, self.pending = position, None
-        return int(params.get(f"{names[1]}{position + 1}"))
+        return int(params.clamped(f"{names[1]}{position + 1}"))
 
     def rudder_arming(self, params, override: dict[int, int], now: float, armed: bool) -> str | None:
         """"arm" or "disarm" once the rudder gesture has been held RUDDER_HOLD_S, else None."""
-        mode = int(params.get("ARMING_RUDDER")) if "ARMING_RUDDER" in params else 0
+        mode = int(params.clamped("ARMING_RUDDER")) if "ARMING_RUDDER" in params else 0
         throttle, yaw = mapped_channel(params, 2), mapped_channel(params, 3)
         gesture = None
         if mode and throttle in override and yaw in override and not self.lost(params, override):
-            low = override[throttle] <= params.get(f"RC{throttle}_MIN") + params.get(f"RC{throttle}_DZ")
-            stick = scaled(params.get, yaw, override[yaw])
+            low = override[throttle] <= params.clamped(f"RC{throttle}_MIN") + params.clamped(f"RC{throttle}_DZ")
+            stick = scaled(params.clamped, yaw, override[yaw])
             if low and stick > RUDDER_FULL and not armed:
                 gesture = "arm"
             elif low and stick < -RUDDER_FULL and armed and mode == 2:
