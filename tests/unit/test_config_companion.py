@@ -106,3 +106,32 @@ def test_group_request_streams_and_dedup():
 def test_host_names_are_accepted_as_addresses():
     c = config("type: udp-client\naddress: fc-modem.local:14550\n")
     assert c.channels[0].address == ("fc-modem.local", 14550)
+
+
+def test_check_config_reports_companion_keys_as_file_line_key_path(tmp_path, capsys):
+    from gcsd.cli import main
+
+    conf = tmp_path / "companion.yaml"
+    conf.write_text(dedent(f"""\
+        state_dir: {tmp_path / 'state'}
+        channels:
+          - name: radio
+            type: serial
+            device: /dev/ttyACM0
+            baud: [921600, 57600]
+            group: fc
+            filter: {{out: {{allow_msgids: [HEARTBEAT, ATTITUDEX]}}}}
+          - name: lan
+            type: udp-server
+            address: 0.0.0.0:14550
+            options: [sign_forwarded]
+            rate_limits: {{ATTITUDE: -1}}
+        routing: {{dedup_ms: 200}}
+    """))
+    assert main(["check-config", str(conf)]) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert lines[0] == (f"{conf}:8: channels[0].filter.out.allow_msgids[1]: unknown message 'ATTITUDEX' in the "
+                        "ardupilotmega dialect; did you mean 'ATTITUDE'?")
+    assert lines[1].startswith(f"{conf}:12: channels[1].options: sign_forwarded is allowed only on serial")
+    assert lines[2] == f"{conf}:13: channels[1].rate_limits.ATTITUDE: expected a number > 0 and <= 1000.0, got -1"
+    assert len(lines) == 3
