@@ -14,6 +14,8 @@ the same way, ``FILE:LINE: key.path: what is wrong`` (the line comes from `Confi
 - In a swarm (vehicle.count > 1) params_file may not set SYSID_THISMAV: every vehicle would take
   the same sysid; the swarm's sysids come from vehicle.sysid.
 - log.tlog must name a writable file in a directory that can be created.
+- The flight-log directory (`flight_logs.dir` under each vehicle's state directory) must be a
+  directory the daemon can create and write (a file in its place is a problem).
 
 `check(config)` only looks (check-config: it must not create anything, and runs as the same
 user as the daemon under systemd's ExecStartPre); `prepare(config)` also creates the
@@ -32,6 +34,8 @@ from .config import Config
 def check(config: Config) -> list[str]:
     """Problems found without changing anything on disk."""
     problems = [*_state_dir_can_be_made(config), *_params_file(config)]
+    if not problems:
+        problems += _dir_can_be_made(config, "flight_logs.dir", Path(config.state_dir) / config.flight_logs.dir)
     if config.params_file is not None and not problems:
         problems += _params_file_content(config) or _swarm_sysid(config)
     if config.log.tlog:
@@ -40,7 +44,8 @@ def check(config: Config) -> list[str]:
 
 
 def prepare(config: Config) -> list[str]:
-    """Create state_dir, the vehicle directories and the FTP roots; problems if that fails."""
+    """Create state_dir, the vehicle directories, the FTP roots and the flight-log directories;
+    problems if that fails."""
     problems = _params_file(config)
     if config.params_file is not None and not problems:
         problems += _swarm_sysid(config)
@@ -58,7 +63,20 @@ def prepare(config: Config) -> list[str]:
     except OSError as exc:
         what = f"cannot use {_show(exc.filename or state_dir)} as the state directory: {exc.strerror or exc}"
         return [*problems, f"{where}: {what}"]
-    return problems + _ftp_roots(config, state_dir, vehicle_dirs)
+    return problems + (_ftp_roots(config, state_dir, vehicle_dirs) or _log_dirs(config, vehicle_dirs))
+
+
+def _log_dirs(config: Config, vehicle_dirs: list[Path]) -> list[str]:
+    """Each vehicle's flight-log directory (`flight_logs.dir` under its state directory)."""
+    for vehicle_dir in vehicle_dirs:
+        directory = vehicle_dir / config.flight_logs.dir
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+            _probe_write(directory)
+        except OSError as exc:
+            what = f"cannot use {_show(exc.filename or directory)} for flight logs: {exc.strerror or exc}"
+            return [f"{config.source.where('flight_logs.dir')}: {what}"]
+    return []
 
 
 def _ftp_roots(config: Config, state_dir: Path, vehicle_dirs: list[Path]) -> list[str]:

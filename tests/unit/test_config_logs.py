@@ -5,7 +5,9 @@ from __future__ import annotations
 from textwrap import dedent
 
 import pytest
+from logging_fixture import restore_logging  # noqa: F401  (an autouse fixture)
 
+from gcsd.cli import main
 from gcsd.config import ConfigError, default_config, parse_config
 from gcsd.config_logs import FlightLogsConfig
 
@@ -44,3 +46,18 @@ def test_values_are_read():
 ])
 def test_problems_name_the_line_and_key(text, expected):
     assert any(p.startswith(expected) for p in problems(text)), problems(text)
+
+
+def test_a_log_directory_that_is_a_file_is_refused_by_check_config_and_run(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "st").mkdir()
+    (tmp_path / "st" / "logs").write_text("a file")
+    config = tmp_path / "g.yaml"
+    config.write_text('state_dir: st\nchannels: [{name: gcs, type: udp-server, address: "127.0.0.1:0"}]\n'
+                      "flight_logs:\n  dir: logs\n")
+    assert main(["check-config", str(config)]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"{config}:4: flight_logs.dir: cannot create st/logs: st/logs is not a directory"]
+    assert main(["run", "-c", str(config)]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"{config}:4: flight_logs.dir: cannot use st/logs for flight logs: File exists"]

@@ -79,7 +79,10 @@ class FlightLogService(Service):
         self._captured: dict[int, LogFile] = {}  # capture key -> file
         self._captured_names: dict[int, tuple[str, float]] = {}  # key -> (file, start)
         self._capture_channels: dict[int, object] = {}
-        store.ensure()
+        try:
+            store.ensure()
+        except OSError as exc:  # preflight refuses this for `gcsd run`; an embedding program may not check
+            log.error("flight_log_dir_unusable", dir=str(store.directory), error=str(exc))
 
     # --- serving ---------------------------------------------------------------------------
     def _transfer(self, inc: Incoming) -> _Served | None:
