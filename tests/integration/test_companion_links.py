@@ -135,6 +135,14 @@ def test_a_serial_device_removed_and_recreated_under_the_same_link_is_opened_aga
     assert _channel(d, "fc")["peers"] == 1
 
 
+def test_a_serial_device_missing_at_start_is_opened_when_it_appears(daemon, ptys, tmp_path):
+    link = str(tmp_path / "usb-ArduPilot_fmuv3-if00")
+    d = daemon({"channels": [{"name": "fc", "type": "serial", "device": link}, udp_channel("gcs")]})
+    assert _channel(d, "fc")["peers"] == 0  # started all the same: the daemon is ready
+    ptys.append(LinkedPty(link))
+    assert _answered(ptys[0], 10.0), "the device was not opened when it appeared"
+
+
 def test_a_baud_list_is_cycled_until_a_good_frame_and_then_kept(daemon, ptys, tmp_path):
     link = str(tmp_path / "usb-radio")
     p = LinkedPty(link)
