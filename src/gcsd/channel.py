@@ -77,6 +77,7 @@ class ChannelStats:
     spoofed_dropped: int = 0  # frames of a payload with a frame from a source its link may not carry (mqtt)
     retained_dropped: int = 0  # retained MQTT messages: stored by the broker, not sent now; never acted on
     duplicates: int = 0  # the same frame again: a redundant link of a group, or routing.dedup_ms (dedup.py)
+    open_failures: int = 0  # attempts to open the transport that failed (a device missing, a name not resolving)
     loop_dropped: int = 0  # frames that came back after gcsd had forwarded them (a forwarding loop, dedup.py)
 
     def as_dict(self) -> dict[str, int]:

@@ -295,6 +295,7 @@ async def run_channel(
                 raise ChannelStartError(
                     f"channel {channel.name}: cannot open {channel.config.type} {host}:{port}: {error}") from None
             log.warning("channel_open_failed", channel=channel.name, error=error, retry_s=backoff)
+            channel.stats.open_failures += 1
             opened(channel, False)
             await asyncio.sleep(backoff)
             backoff = min(backoff * 2, BACKOFF_MAX_S)

@@ -80,6 +80,10 @@ def test_a_name_that_does_not_resolve_is_retried_and_stops_nothing(daemon, clien
     gcs.heartbeat()
     assert wait_for(gcs, from_vehicle)  # the other channel works
     assert _channel(d, "lte")["peers"] == 0
+    # tried again with the backoff (0.5 s, then 1 s, ...): a second failed lookup within 3 s
+    assert _poll(lambda: _channel(d, "lte")["open_failures"] >= 2, 3.0)
+    gcs.heartbeat()
+    assert wait_for(gcs, from_vehicle, since=gcs.mark())
 
 
 # --- serial devices that come back ------------------------------------------------------------
