@@ -8,6 +8,7 @@ import os
 import time
 from pathlib import Path
 
+import pytest
 from pymavlink import DFReader
 
 from .helpers import VEHICLE, M, is_ack, is_type, measure_rates, pump, udp_channel, udp_url, wait_for
@@ -88,6 +89,7 @@ def download(c, log_id: int, size: int, timeout: float = 20.0) -> bytes:
     return b"".join(got[ofs] for ofs in sorted(got))
 
 
+@pytest.mark.slow
 def test_a_simulated_flight_leaves_a_log_with_the_flight_that_downloads_byte_for_byte(daemon, client):
     d = daemon({"channels": [udp_channel("gcs")]})
     c = client(udp_url(d.port("gcs")))

@@ -9,6 +9,7 @@ import random
 import time
 from pathlib import Path
 
+import pytest
 from pymavlink import DFReader
 
 from fake_logger_fc import FakeLoggerFC
@@ -70,6 +71,7 @@ class FlightController:
                 self.c.send(M.MAVLink_remote_log_data_block_message(*self.fc.client, seqno, data))
 
 
+@pytest.mark.slow
 def test_a_streamed_log_is_captured_byte_for_byte_through_loss_a_pause_and_a_reboot(daemon, client):
     d = daemon({"vehicle": {"type": "companion"}, "channels": [udp_channel("fc"), udp_channel("gcs")],
                 "flight_logs": {"capture": True, "channels": ["fc"]}})
