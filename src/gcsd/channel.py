@@ -181,6 +181,7 @@ class Channel:
         self.output_enabled = "high_latency" not in config.options
         # companion routing (filters.py): None when the channel has no filter / no rate cap
         self.in_gate, self.out_gate = gates(config)
+        self.dedup = config.group is not None  # same frames dropped (a group; all channels with routing.dedup_ms)
         self.retired = False  # removed at run time: its slot waits for the next added channel (livechannels.py)
         self.stream_requests = StreamRequests(config.request_streams) if config.request_streams else None
 

@@ -72,7 +72,7 @@ class GCS:
         # routing.dedup_ms: every frame; else the frames of redundant link groups, within LOOP_WINDOW_S
         dedup_ms = config.routing.dedup_ms
         self.dedup = RecentFrames(dedup_ms / 1000 if dedup_ms else LOOP_WINDOW_S)
-        self.dedup_all = dedup_ms > 0
+        self.dedup_all = dedup_ms > 0  # else only the channels of a group (Channel.dedup)
         restored = load_specs(Path(config.state_dir), config.channels)  # channels added at run time
         # channels, signing, tlog, vehicles, router and every callback: the composition root
         compose.build(self, [*config.channels, *(c for _, c in restored)], backend, producers)
@@ -85,6 +85,8 @@ class GCS:
             log.warning("signing_timestamp_repaired", reason=self.signing_manager.load_repair)
         self.started_s = self.clock.now()
         self._by_sysid = {n.sysid: n for n in self.nodes}
+        for ch in self.channels:
+            ch.dedup = ch.dedup or self.dedup_all
         self.live = LiveChannels(self, restored)
 
     # --- channels at run time (livechannels.py) ------------------------------------------------
@@ -100,6 +102,7 @@ class GCS:
     def attach(self, index: int, config: ChannelConfig) -> Channel:
         """A new channel in slot `index`: wired, known to the router and to every vehicle."""
         ch = compose.channel(self, index, config)
+        ch.dedup = ch.dedup or self.dedup_all
         if index == len(self.channels):
             self.channels.append(ch)
             self._wakeups.append(asyncio.Event())
@@ -140,7 +143,7 @@ class GCS:
     def on_frame(self, channel: Channel, frame: Frame, now: float) -> None:
         """Route one accepted frame and hand it to the local components it is for (inside the
         channel's receive boundary)."""
-        if (self.dedup_all or channel.policy.group is not None) and self.dedup.check(frame.raw, now):
+        if channel.dedup and self.dedup.check(frame.raw, now):
             channel.stats.duplicates += 1  # the copy that came the other way (a group), or dedup_ms
             return
         if self.loops.seen(frame.raw, now):  # a frame we forwarded, back again: a loop (dedup.py)
