@@ -23,7 +23,7 @@ from pathlib import Path
 
 import structlog
 
-from . import control, preflight, statelock
+from . import control, preflight, statelock, tcpserver
 from .config import Config, ConfigError, load_config
 from .gcs import GCS
 from .notify import Notifier
@@ -56,6 +56,9 @@ async def run_daemon(config: Config) -> int:
         if problems:
             raise ConfigError(problems)
         lock = statelock.acquire(Path(config.state_dir))  # before anything reads or writes state
+        limit, needed = tcpserver.ensure_descriptor_budget(tcpserver.descriptors_needed(config.channels))
+        if limit < needed:  # the hard limit is lower: connections may be refused (counted, tcpserver.py)
+            log.warning("descriptor_budget_short", limit=limit, needed=needed)
         gcs = GCS(config)
         gcs_ref.append(gcs)
         log.info(

@@ -26,6 +26,9 @@ once when the channel needs no signature (TCP cannot be spoofed and a plain pyma
 waits for our HEARTBEAT first), otherwise only after a good signed frame. Client and serial
 channels have their one peer from the start. At most `max_peers` peers are served; a new one
 replaces a connection that has not sent a good frame yet, else the peer silent the longest. A udp-server forgets a peer silent for 30 s (`sweep`).
+Connections waiting to authenticate count against max_peers too (one waiting slot is always
+left), the oldest of the host holding the most goes first, and one still waiting after
+UNAUTHENTICATED_TIMEOUT_S is closed: unauth.py has the rules and why.
 
 Output: every admitted peer gets every frame. Forwarded frames go out byte-exact; our own
 messages are encoded once per version in use on the channel (usually once, MAVLink2 signed
@@ -44,6 +47,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import Protocol
 
+from . import unauth
 from .boundary import ErrorCounts
 from .codec import MAX_FRAME_BYTES, STX_V2, Encoder, Frame, FrameParser, MAVLink_message, ParseStats
 from .config import ChannelConfig
@@ -79,6 +83,8 @@ class ChannelStats:
     duplicates: int = 0  # the same frame again: a redundant link of a group, or routing.dedup_ms (dedup.py)
     open_failures: int = 0  # attempts to open the transport that failed (a device missing, a name not resolving)
     loop_dropped: int = 0  # frames that came back after gcsd had forwarded them (a forwarding loop, dedup.py)
+    unauthenticated_closed: int = 0  # connections closed before their first good frame (unauth.py)
+    accept_failures: int = 0  # tcp-server accept() refused by the system (out of descriptors...; tcpserver.py)
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -205,9 +211,18 @@ class Channel:
         peer = Peer(key, write, self.clock(), self._new_parser(), self._start_v1, close)
         if self.serve_on_connect:
             self._admit(peer)
-        else:
-            self._waiting[key] = peer
+            return peer
+        if len(self._waiting) >= unauth.waiting_slots(self.max_peers, len(self.peers)):
+            self._close_unauthenticated(self._waiting[unauth.evictee(self._waiting)])
+        self._waiting[key] = peer
         return peer
+
+    def _close_unauthenticated(self, peer: Peer) -> None:
+        """A connection that never authenticated, closed for a newer one or after its timeout (unauth.py)."""
+        self.remove_peer(peer.key)
+        self.stats.unauthenticated_closed += 1
+        if peer.close is not None:
+            peer.close()
 
     def stranger(self, key: object, now: float) -> Peer:
         """A datagram's sender that is not a peer: parsed by the shared parser, served only if
@@ -220,6 +235,7 @@ class Channel:
             silent = min(self.peers.values(), key=lambda p: (p.heard, p.last_rx_s))
             self.remove_peer(silent.key)
             self.stats.peers_replaced += 1
+            self.stats.unauthenticated_closed += not silent.heard
             if silent.close is not None:
                 silent.close()
         if peer.write is None:
@@ -264,10 +280,15 @@ class Channel:
         return gone
 
     def sweep(self, now: float) -> list[object]:
-        """A udp-server's peers silent for UDP_PEER_TIMEOUT_S are forgotten (checked once a second)."""
-        if self.config.type != "udp-server" or now - self._last_sweep_s < PEER_SWEEP_INTERVAL_S:
+        """Checked once a second: connections still unauthenticated after their timeout are closed
+        (unauth.py); a udp-server's peers silent for UDP_PEER_TIMEOUT_S are forgotten (returned)."""
+        if now - self._last_sweep_s < PEER_SWEEP_INTERVAL_S:
             return []
         self._last_sweep_s = now
+        for key in unauth.expired(self._waiting, now):
+            self._close_unauthenticated(self._waiting[key])
+        if self.config.type != "udp-server":
+            return []
         return self.forget_silent_peers(now)
 
     # --- receive ---------------------------------------------------------------------------

@@ -216,7 +216,8 @@ def same_file(a: str | None, b: str | os.PathLike) -> bool:
 
 
 # counters of what a peer or a broker sent that was dropped on purpose (issue 17), as table columns
-_DROP_COLUMNS = (("spoofed_dropped", "spoofed"), ("retained_dropped", "retained"), ("loop_dropped", "loop"))
+_DROP_COLUMNS = (("spoofed_dropped", "spoofed"), ("retained_dropped", "retained"), ("loop_dropped", "loop"),
+                 ("unauthenticated_closed", "unauth closed"), ("accept_failures", "accept failed"))
 
 
 def _table(title: str, headers: list[str], rows: list[list]) -> str:

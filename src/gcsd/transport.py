@@ -15,7 +15,9 @@ socket buffer is logged and counted; the channel reconnects, and the daemon keep
   SO_BROADCAST and the address is a broadcast address until a ground station answers with a
   good frame, then that station only (gcsd.discovery, ArduPilot's udp:ADDR:bcast).
 - tcp-server: every accepted connection is a peer (served at once, or after its first good
-  frame when the channel needs signatures).
+  frame when the channel needs signatures; unauth.py bounds and times out the waiting ones).
+  The accept loop is tcpserver.py: it pauses instead of spinning when the process is out of
+  descriptors, and counts and rate-limits what it logs.
 - tcp-client, serial: one peer while connected; reconnect after loss.
 
 Host names are resolved (without blocking the loop) at every open, so a name whose address
@@ -41,6 +43,7 @@ from .baudhunt import BaudHunt
 from .channel import Channel
 from .config_schema import SERVER_TYPES
 from .discovery import BroadcastLock
+from .tcpserver import Listener, listen
 
 log = structlog.get_logger("gcsd.transport")
 
@@ -221,8 +224,8 @@ async def _open(channel: Channel, baud: int | None = None):
         return proto.close, proto.closed
     if kind == "tcp-server":
         host, port = cfg.address
-        server = await loop.create_server(lambda: _Stream(channel, server=True), host, port, reuse_address=True)
-        channel.local_address = server.sockets[0].getsockname()[:2]
+        server = Listener(channel, listen(host, port), lambda: _Stream(channel, server=True))
+        channel.local_address = server.sock.getsockname()[:2]
         closed = loop.create_future()
 
         def close():

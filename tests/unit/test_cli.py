@@ -262,10 +262,12 @@ def test_status_of_a_socket_that_is_not_gcsd_exits_1_with_one_line(tmp_path, mon
 def test_status_table_shows_what_was_dropped_on_purpose():
     from gcsd.control import format_status
 
-    channel = {**STATUS["channels"][0], "spoofed_dropped": 31, "retained_dropped": 32, "loop_dropped": 33}
+    channel = {**STATUS["channels"][0], "spoofed_dropped": 31, "retained_dropped": 32, "loop_dropped": 33,
+               "unauthenticated_closed": 34, "accept_failures": 35}
     text = format_status({**STATUS, "channels": [channel]})
     lines = text.splitlines()
     at = lines.index("Channel errors and drops (counts)")
     headers, row = lines[at + 1], lines[at + 3].split()
-    assert "spoofed" in headers and "retained" in headers and "loop" in headers
-    assert row[-3:] == ["31", "32", "33"]
+    for header in ("spoofed", "retained", "loop", "unauth closed", "accept failed"):
+        assert header in headers
+    assert row[-5:] == ["31", "32", "33", "34", "35"]
