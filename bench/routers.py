@@ -177,11 +177,14 @@ def gcsd_available(env: dict | None = None) -> tuple[bool, str]:
     return True, text
 
 
-def gcsd_config(workdir: Path, channels: list[str], extra: str = "") -> Path:
+def gcsd_config(workdir: Path, channels: list[str], extra: str = "", http: str | None = "127.0.0.1:0") -> Path:
+    """The API is on, as by default, but on a free port (never the default 8088 another gcsd may hold);
+    http=None turns it off."""
     cfg = workdir / f"gcsd-{len(list(workdir.glob('gcsd-*.yaml')))}.yaml"
     lines = [
         f"state_dir: {workdir / 'state'}",
         "log: {level: warning, format: json}",
+        "http: {address: null}" if http is None else f'http: {{address: "{http}"}}',
         extra,
         "channels:",
         *[f"  - {c}" for c in channels],

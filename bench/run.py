@@ -4,7 +4,7 @@ one vehicle's cost.
     python -m bench                      # everything (about 5 minutes on an idle machine)
     python -m bench --quick              # smoke run (about 1 minute)
     python -m bench throughput latency   # just these; also: harness, vehicle, params, param_flood, mission,
-                                         # signing, swarm, ftp, fleet (the MQTT fleet, bench/fleet.py),
+                                         # signing, swarm, http, ftp, fleet (the MQTT fleet, bench/fleet.py),
                                          # lossy (mission upload time vs loss, bench/lossy.py),
                                          # logs (flight-log download and capture, bench/logs.py),
                                          # companion (filters and rate caps, bench/companion.py)
@@ -37,6 +37,7 @@ if __package__ in (None, ""):  # run as a script: python bench/run.py
 
 from bench import companion as bench_companion  # noqa: E402
 from bench import fleet as bench_fleet  # noqa: E402
+from bench import http as bench_http  # noqa: E402
 from bench import ftp as bench_ftp  # noqa: E402
 from bench import logs as bench_logs  # noqa: E402
 from bench import lossy as bench_lossy  # noqa: E402
@@ -64,7 +65,7 @@ from bench.routers import (  # noqa: E402
     start_mavproxy,
 )
 
-WHAT = ("harness", "throughput", "latency", "vehicle", "params", "param_flood", "mission", "signing", "swarm",
+WHAT = ("harness", "throughput", "latency", "vehicle", "params", "param_flood", "mission", "signing", "swarm", "http",
         "ftp", "fleet", "lossy", "logs", "companion")
 ROUTERS = {"gcsd": "gcsd", "mavlink-router": "mavlink-router", "mavproxy": "MAVProxy"}  # name -> column
 LATENCY_RATE = 1000
@@ -267,6 +268,8 @@ class Runner:
             self.mission()
         if "signing" in a.what:
             self.res["signing"] = bench_signing.measure_signing(self)
+        if "http" in a.what:  # bench/http.py: the HTTP API under load, the heartbeat meanwhile
+            self.res["http"] = bench_http.measure(self.workdir, 3.0 if a.quick else 10.0, self.gcsd_env)
         if "swarm" in a.what:
             self.res["swarm"] = bench_swarm.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
         if "ftp" in a.what:  # bench/ftp.py: 10 MB burst read and param.pck, against MAVSDK's ftp_server
@@ -467,6 +470,8 @@ class Runner:
             out += ["", bench_signing.table(self.res["signing"])]
         if self.res.get("swarm"):
             out += ["", bench_swarm.table(self.res["swarm"])]
+        if self.res.get("http"):
+            out += ["", bench_http.table(self.res["http"])]
         if self.res.get("ftp"):
             out += ["", "FTP: 10 MB burst read and @PARAM/param.pck, gcsd against MAVSDK's ftp_server (bench/ftp.py)",
                     "", bench_ftp.table(self.res["ftp"])]

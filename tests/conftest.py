@@ -64,6 +64,10 @@ class RunningDaemon:
         if self._error:
             raise self._error
 
+    def http_url(self) -> str:
+        host, port = self.gcs.http.address
+        return f"http://{host}:{port}"
+
     def port(self, name: str) -> int:
         for ch in self.gcs.channels:
             if ch.name == name:
@@ -92,6 +96,7 @@ def daemon(tmp_path: Path):
     def start(conf: str | dict, backend=None, producers=None) -> RunningDaemon:
         data = yaml.safe_load(conf) if isinstance(conf, str) else dict(conf)
         data.setdefault("state_dir", str(tmp_path / "state"))
+        data.setdefault("http", {"address": "127.0.0.1:0"})  # as the channels: an ephemeral port
         config = parse_config(yaml.safe_dump(data), "test.yaml")
         d = RunningDaemon(config, backend, producers).start()
         started.append(d)

@@ -33,6 +33,7 @@ from .channel import Channel
 from .config import ChannelConfig, Config
 from .config_mqtt import route_capacity
 from .logs.wiring import flight_log_service, log_dir
+from .http import wiring as http_wiring
 from .node import VehicleNode
 from .params import ParamStore
 from .persist import WriteBehind
@@ -261,7 +262,8 @@ def build(gcs, channels, backend=None, producers: dict | None = None) -> None:
     )
     gcs.signing = gcs.signing_manager.signing
     gcs.tlog = TlogWriter(config.log.tlog) if config.log.tlog else None
-    gcs.channels = [channel(gcs, i, c) for i, c in enumerate(channels)]
+    # the HTTP API's own channel comes after the configured ones (gcsd.http.wiring)
+    gcs.channels = [channel(gcs, i, c) for i, c in enumerate([*channels, *http_wiring.channel_configs(config)])]
     gcs.nodes = [
         build_vehicle(i, config, clock, gcs.channels, functools.partial(gcs.wake_node, i), errors,
                       gcs.signing_manager, backend=None if backend is None else backend(i), producers=producers)
@@ -272,12 +274,15 @@ def build(gcs, channels, backend=None, producers: dict | None = None) -> None:
                         RouteTable(route_capacity((c.type for c in config.channels), MAX_ROUTES)))
     # taps: every accepted frame, after signing, filters and loop checks, before routing
     gcs.taps = [service.tap for n in gcs.nodes for service in n.services if hasattr(service, "tap")]
+    gcs.http = http_wiring.attach(gcs)  # the HTTP API over all of it, or None (`http.address: null`)
+    if gcs.http is not None:
+        gcs.taps.append(gcs.http.tap)  # its message tree takes every accepted frame
 
 
 def channel(gcs, index: int, config: ChannelConfig) -> Channel:
     """A channel connected to the daemon's receive path, signing, tlog and error boundary (at
     start, and for a channel added at run time: livechannels.py)."""
-    ch = Channel(index, config, gcs.clock.now)
+    ch = http_wiring.channel_class(config)(index, config, gcs.clock.now)
     ch.signing = gcs.signing
     ch.wall = gcs.clock.wall
     ch.tlog = gcs.tlog

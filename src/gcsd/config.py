@@ -45,6 +45,7 @@ from .config_companion import (
     read_routing,
 )
 from .config_logs import read_flight_logs
+from .config_http import read_http
 from .config_mqtt import MQTT_KEYS, read_mqtt
 from .config_reader import Field, Reader, Section, describe, is_null, line_of
 from .config_schema import (  # noqa: F401  the schema, re-exported: `from gcsd.config import Config` works
@@ -152,7 +153,7 @@ def _check_depth(text: str, filename: str) -> None:
 # --- the schema, one function per section -------------------------------------------------------
 
 _TOP_KEYS = ("vehicle", "state_dir", "params_file", "gcs", "mission", "ftp", "signing", "channels", "log",
-             "serial_control", "routing", "flight_logs", "can")
+             "serial_control", "routing", "flight_logs", "can", "http")
 _VEHICLE_KEYS = ("type", "sysid", "compid", "count", "home", "speedup", "camera", "gimbal")
 _MISSION_KEYS = ("max_items", "max_fence", "max_rally", "retry_ms")
 _CHANNEL_KEYS = ("name", "type", "address", "device", "baud", "mavlink", "streams", "options",
@@ -187,6 +188,7 @@ def _config(r: Reader, top: Section) -> Config:
         routing=read_routing(r, top["routing"]),
         flight_logs=read_flight_logs(r, top["flight_logs"], [c.name for c in channels]),
         can=read_can(r, top["can"]),
+        http=read_http(r, top["http"], _address),
     )
 
 

@@ -17,6 +17,7 @@ from types import MappingProxyType
 from .config_can import CanConfig
 from .config_companion import ChannelFilter, RoutingConfig
 from .config_logs import FlightLogsConfig
+from .config_http import HttpConfig
 from .config_mqtt import MqttConfig
 from .streams import STREAM_NAMES
 
@@ -181,6 +182,7 @@ class Config:
     routing: RoutingConfig = field(default_factory=RoutingConfig)
     flight_logs: FlightLogsConfig = field(default_factory=FlightLogsConfig)
     can: CanConfig = field(default_factory=CanConfig)
+    http: HttpConfig = HttpConfig()  # config_http.py
     source: Source = field(default=Source(), compare=False, repr=False)
 
 

@@ -46,7 +46,7 @@ FIRST_OPEN_S = 10.0
 SPEC_KEYS = ("name", "type", "address", "device", "baud", "options")
 _WHERE = re.compile(r"^[^\n]*?:\d+: (?:channels\[0\]\.?)?")
 _RESTART_SECTIONS = ("vehicle", "state_dir", "params_file", "gcs", "mission", "ftp", "signing", "log",
-                     "serial_control", "routing")
+                     "serial_control", "routing", "http")
 
 
 def channel_from_spec(spec: dict, running: list[ChannelConfig]) -> tuple[ChannelConfig | None, str | None]:
@@ -165,6 +165,8 @@ class LiveChannels:
             ch = next((c for c in self.running() if c.name == name), None)
             if ch is None:
                 return f"no channel named {name!r} is running"
+            if ch.config.type == "local":
+                return f"{name} is the HTTP API's own channel: set http.address to null and restart to remove it"
             await self._close(ch)
             if self.specs.pop(name, None) is not None:
                 self._save()

@@ -16,6 +16,7 @@ the same way, ``FILE:LINE: key.path: what is wrong`` (the line comes from `Confi
 - log.tlog must name a writable file in a directory that can be created.
 - The flight-log directory (`flight_logs.dir` under each vehicle's state directory) must be a
   directory the daemon can create and write (a file in its place is a problem).
+- http.token_file, when the API is on, must be readable with a token on its first line.
 
 `check(config)` only looks (check-config: it must not create anything, and runs as the same
 user as the daemon under systemd's ExecStartPre); `prepare(config)` also creates the
@@ -29,6 +30,7 @@ import tempfile
 from pathlib import Path
 
 from .config import Config
+from .config_http import read_token
 
 
 def check(config: Config) -> list[str]:
@@ -40,13 +42,25 @@ def check(config: Config) -> list[str]:
         problems += _params_file_content(config) or _swarm_sysid(config)
     if config.log.tlog:
         problems += _parent_can_be_made(config, "log.tlog", Path(config.log.tlog))
-    return problems
+    return problems + _token_file(config)
+
+
+def _token_file(config: Config) -> list[str]:
+    http = config.http
+    if http.address is None or http.token_file is None:
+        return []
+    try:
+        read_token(http.token_file)
+    except (OSError, ValueError) as exc:
+        why = getattr(exc, "strerror", None) or exc
+        return [f"{config.source.where('http.token_file')}: cannot read a token from {http.token_file}: {why}"]
+    return []
 
 
 def prepare(config: Config) -> list[str]:
     """Create state_dir, the vehicle directories, the FTP roots and the flight-log directories;
     problems if that fails."""
-    problems = _params_file(config)
+    problems = _params_file(config) + _token_file(config)
     if config.params_file is not None and not problems:
         problems += _swarm_sysid(config)
     if config.log.tlog:

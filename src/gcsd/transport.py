@@ -222,6 +222,8 @@ async def _open(channel: Channel, baud: int | None = None):
             channel.add_peer(addr, proto.broadcast_writer() if bcast else proto.writer(addr))
             log.info("peer_joined", channel=channel.name, peer=f"{addr[0]}:{addr[1]}")
         return proto.close, proto.closed
+    if kind == "local":  # the HTTP API's channel (gcsd.http.local): open = the API listening
+        return await channel.open()
     if kind == "tcp-server":
         host, port = cfg.address
         server = Listener(channel, listen(host, port), lambda: _Stream(channel, server=True))

@@ -98,7 +98,7 @@ def test_channel_add_and_remove_at_run_time_leave_the_other_channels_alone(daemo
         r for r in after["routes"] if r["sysid"] == 255).items()
     assert _max_gap_s(station, mark) < GAP_LIMIT_S
     listed = _cli("channel", "list", "-c", str(conf), "--json")
-    assert [c["name"] for c in json.loads(listed.stdout)] == ["gcs"]
+    assert [c["name"] for c in json.loads(listed.stdout)] == ["gcs", "http"]  # http: the API's own channel
 
 
 def test_channels_added_at_run_time_are_restored_at_the_next_start(daemon, client, tmp_path):
@@ -110,7 +110,7 @@ def test_channels_added_at_run_time_are_restored_at_the_next_start(daemon, clien
     ]}))
     d = daemon({"channels": [udp_channel("gcs")]})
     names = [c["name"] for c in d.status()["channels"]]
-    assert names == ["gcs", "lte"]  # the bad entry is skipped (and logged), the good one restored
+    assert names == ["gcs", "lte", "http"]  # the bad entry is skipped (and logged), the good one restored
     station = client(udp_url(d.port("lte")), 255, 190)
     station.heartbeat()
     assert wait_for(station, from_vehicle)
@@ -158,7 +158,7 @@ def test_sighup_reloads_the_channels_and_a_bad_file_changes_nothing(tmp_path, cl
         assert [r for r in newcomer.since(0) if r.src == VEHICLE], "the channel added to the file never opened"
         _keep_reading(station, 0.5)
         after = _status(sock)
-        assert sorted(_by_name(after)) == ["gcs", "new"]
+        assert sorted(_by_name(after)) == ["gcs", "http", "new"]  # http: the API's own channel
         kept = _by_name(after)["gcs"]
         assert kept["peers"] == 1 and kept["packets_in"] >= before["packets_in"]
         assert kept["packets_out"] > before["packets_out"]
@@ -189,7 +189,7 @@ def test_sighup_reloads_the_channels_and_a_bad_file_changes_nothing(tmp_path, cl
         mark = newcomer.mark()
         newcomer.command_long(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
         assert wait_for(newcomer, lambda r: r.type == "COMMAND_ACK" and r.src == VEHICLE, since=mark)
-        assert sorted(_by_name(_status(sock))) == ["gcs", "new"]  # nothing changed
+        assert sorted(_by_name(_status(sock))) == ["gcs", "http", "new"]  # nothing changed
         assert proc.poll() is None
     finally:
         proc.send_signal(signal.SIGTERM)

@@ -207,3 +207,14 @@ def test_tree_is_bounded_by_components():
         tree.update(1, compid, "ATTITUDE", M.MAVLink_attitude_message(1, 0, 0, 0, 0, 0, 0), 1.0)
     assert len(tree.document(["vehicles", "1", "components"])) == 3
     assert tree.components_refused == 2
+
+
+@pytest.mark.parametrize("name", sorted(cls.msgname for cls in M.mavlink_map.values()))
+def test_every_template_reads_back_and_packs(name):
+    doc = template(name)
+    json.dumps(doc, allow_nan=False)
+    header, msg = parse_envelope(doc)
+    assert msg.get_type() == name and header.system_id == 255
+    msg.pack(M.MAVLink(None))
+    again = message_json(msg)
+    assert parse_message(again).pack(M.MAVLink(None)) == msg.pack(M.MAVLink(None))
