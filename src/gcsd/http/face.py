@@ -156,14 +156,14 @@ class VehicleFace:
         return now
 
     def mission(self) -> dict:
-        items = self.node.mission.read_plan(M.MAV_MISSION_TYPE_MISSION) or ()
+        items = self.node.plans.read_plan(M.MAV_MISSION_TYPE_MISSION) or ()
         home = home_item(self.node.state)
         return to_plan(tuple(items) if items else (home,), home, self.node.vehicle.mav_type)
 
     def put_mission(self, document: object) -> int:
         items = from_plan(document)
         plan = [home_item(self.node.state), *items] if items else []
-        result = self.node.mission.write_plan(M.MAV_MISSION_TYPE_MISSION, plan)
+        result = self.node.plans.write_plan(M.MAV_MISSION_TYPE_MISSION, plan)
         if result != M.MAV_MISSION_ACCEPTED:
             raise PlanError(f"refused: {M.enums['MAV_MISSION_RESULT'][result].name}")
         return len(items)
