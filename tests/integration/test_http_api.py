@@ -165,9 +165,10 @@ def test_gcsd_routes(api):
     assert (status, body["value"]) == (200, 725.0)
     seen = wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and r.msg.param_id == "WPNAV_SPEED", since=mark)
     assert seen and seen.msg.param_value == 725.0  # the ground station is told, as after its own PARAM_SET
-    status, _, body, _ = call(f"{url}/v1/vehicles/1/parameters/WPNAV_SPEED", "PUT", {"value": 1e9})
-    assert status == 422 and "refused" in body["error"]
-    assert call(f"{url}/v1/vehicles/1/parameters/WPNAV_SPEED")[2]["value"] == 725.0
+    before = call(f"{url}/v1/vehicles/1/parameters/FORMAT_VERSION")[2]["value"]
+    status, _, body, _ = call(f"{url}/v1/vehicles/1/parameters/FORMAT_VERSION", "PUT", {"value": before + 1})
+    assert status == 422 and "read-only" in body["error"]  # refused as a ground station's PARAM_SET is
+    assert call(f"{url}/v1/vehicles/1/parameters/FORMAT_VERSION")[2]["value"] == before
     assert call(f"{url}/v1/vehicles/1/parameters/NOPE")[0] == 404
     assert call(f"{url}/v1/vehicles/2/parameters")[0] == 404
     assert call(f"{url}/v1/vehicles/1/parameters/WPNAV_SPEED", "PUT", {"value": "fast"})[0] == 422

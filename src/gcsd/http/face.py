@@ -151,7 +151,7 @@ class VehicleFace:
         wanted = to_type(entry.ptype, value)
         if not math.isclose(float(now["value"]), float(wanted), rel_tol=1e-6, abs_tol=1e-6):
             d = self.node.params.definition(name)
-            why = "read-only" if d.read_only else f"range {d.min:g}..{d.max:g}" if d.min is not None else "refused"
+            why = "read-only" if d.read_only else "refused by the vehicle"
             raise RequestFailed(422, f"{name}: {value:g} refused ({why}); it is {now['value']}")
         return now
 
