@@ -76,14 +76,6 @@ OVERRIDES: dict[tuple[str, int | str], tuple[str, str]] = {
 }
 
 
-# (MESSAGE, name) -> services that all handle it, called in this order: a message more than one
-# service must see. Anything else registered twice is an override (above) or an error.
-SHARED: dict[tuple[str, int | str], tuple[str, ...]] = {
-    # the control service's GCS presence, the flight logs' flight controllers (capture)
-    (MESSAGE, "HEARTBEAT"): ("control", "logs"),
-}
-
-
 class DuplicateRegistration(Exception):
     """A message or command id registered by two services without an entry in OVERRIDES."""
 
@@ -110,12 +102,6 @@ class Registry:
 
     def _put(self, kind: str, key: int | str, handler: Callable, name: str, table: dict) -> None:
         prev = self.owner.get((kind, key))
-        shared = SHARED.get((kind, key), ())
-        if prev is not None and name in shared and prev.split("+")[-1] in shared[:shared.index(name)]:
-            first = table[key]
-            table[key] = lambda inc, first=first, then=handler: (first(inc), then(inc))
-            self.owner[(kind, key)] = f"{prev}+{name}"
-            return
         if prev is not None:
             rule = self.overrides.get((kind, key))
             if rule == (prev, name):

@@ -12,9 +12,9 @@
   (header, banner, parameters, mode); while armed and DISARMED_TAIL_S after disarming, samples
   are appended at the recorder's rate (`tick`, run from the send passes: its deadline is the
   next sample); then the file is finished off the loop (fsync).
-- **Capture** (capture.py; `capture`, node 0 only): HEARTBEAT (shared with the control service,
-  compose.SHARED) and SYSTEM_TIME of flight controllers and REMOTE_LOG_DATA_BLOCK addressed to
-  us go to the core; its REMOTE_LOG_BLOCK_STATUS answers are sent on the flight
+- **Capture** (capture.py; `capture`, node 0 only): HEARTBEAT and SYSTEM_TIME of flight
+  controllers (a tap: every accepted frame, before routing; only a capturing service has one)
+  and REMOTE_LOG_DATA_BLOCK addressed to us go to the core; its REMOTE_LOG_BLOCK_STATUS answers are sent on the flight
   controller's channel at once, its writes go to the store. A block that cannot be written
   (min_free_mb reached and nothing left to rotate) is counted in `write_refused` and still ACKed.
 
@@ -79,6 +79,8 @@ class FlightLogService(Service):
         self._captured: dict[int, LogFile] = {}  # capture key -> file
         self._captured_names: dict[int, tuple[str, float]] = {}  # key -> (file, start)
         self._capture_channels: dict[int, object] = {}
+        if capture is not None:  # a tap costs every frame of every channel: only where it is needed
+            self.tap = self._tap
         try:
             store.ensure()
         except OSError as exc:  # preflight refuses this for `gcsd run`; an embedding program may not check
@@ -233,17 +235,21 @@ class FlightLogService(Service):
             log.error("flight_log_write_failed", file=f.name, error=str(exc))
 
     # --- capture ---------------------------------------------------------------------------
-    def handle_HEARTBEAT(self, inc: Incoming) -> None:
-        """Shared with the control service (compose.SHARED): a flight controller's heartbeat."""
-        if self.capture is None:
+    def _tap(self, channel, frame, now: float) -> None:
+        """Every accepted frame (compose's taps; only a capturing service has one): the flight
+        controllers' HEARTBEAT and SYSTEM_TIME, whoever they are addressed to."""
+        msgid = frame.msgid
+        if msgid != M.MAVLINK_MSG_ID_HEARTBEAT and msgid != M.MAVLINK_MSG_ID_SYSTEM_TIME:
             return
-        self._capture_channels[inc.channel.index] = inc.channel
-        self._apply(self.capture.handle_heartbeat(inc.channel.index, inc.frame.sysid, inc.frame.compid,
-                                                  inc.msg.autopilot, inc.now), inc.now)
-
-    def handle_SYSTEM_TIME(self, inc: Incoming) -> None:
-        if self.capture is not None:
-            self._apply(self.capture.handle_system_time(inc.frame.sysid, inc.msg.time_boot_ms, inc.now), inc.now)
+        capture, msg = self.capture, frame.msg
+        if msg is None:
+            return
+        if msgid == M.MAVLINK_MSG_ID_HEARTBEAT:
+            self._capture_channels[channel.index] = channel
+            effects = capture.handle_heartbeat(channel.index, frame.sysid, frame.compid, msg.autopilot, now)
+        else:
+            effects = capture.handle_system_time(frame.sysid, msg.time_boot_ms, now)
+        self._apply(effects, now)
 
     def handle_REMOTE_LOG_DATA_BLOCK(self, inc: Incoming) -> None:
         if self.capture is None:
