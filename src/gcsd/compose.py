@@ -25,6 +25,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from . import telemetry
@@ -32,10 +33,11 @@ from .autopilot.core import Autopilot
 from .channel import Channel
 from .config import ChannelConfig, Config
 from .config_mqtt import route_capacity
-from .logs.wiring import flight_log_service, log_dir
 from .http import wiring as http_wiring
+from .logs.wiring import flight_log_service, log_dir
 from .node import VehicleNode
-from .params import ParamStore
+from .params import ParamStore, sysids
+from .params.parmfile import read_parm
 from .persist import WriteBehind
 from .router import MAX_ROUTES, Router, RouteTable
 from .services.commands import CommandService
@@ -56,6 +58,8 @@ from .sim.swarm import initial_state
 from .streams import PARAM_SUFFIX, STREAM_NAMES
 from .tlog import TlogWriter
 from .vehicles import vehicle_params, vehicle_type
+
+log = structlog.get_logger("gcsd.compose")
 
 COMMAND, MESSAGE = "command", "message"
 
@@ -163,10 +167,39 @@ def vehicle_state_dir(config: Config, index: int) -> Path:
     return Path(config.state_dir) / f"vehicle-{index + 1}"
 
 
+def _saved_sysid(config: Config, index: int) -> float:
+    """The SYSID_THISMAV vehicle `index` saved (its configured sysid if none)."""
+    configured = config.vehicle.sysid + index
+    try:
+        values, _ = read_parm(vehicle_state_dir(config, index) / "mav.parm")
+    except OSError:
+        return configured
+    return values.get(sysids.NAME, configured)
+
+
+def _start_sysid(node_index: int, config: Config, store: ParamStore, planned: int | None) -> None:
+    """SYSID_THISMAV at start: the planned one (a swarm, params/sysids.py), or the saved one if it
+    is a system id; else the configured one, logged, and saved by the boot count's save."""
+    configured = config.vehicle.sysid + node_index
+    wanted = store.get(sysids.NAME)
+    use = planned if planned is not None else sysids.start_sysids([configured], [wanted])[0]
+    if use != wanted:
+        log.warning("sysid_fallback", vehicle=node_index + 1, saved=wanted, sysid=use,
+                    reason="not a system id" if not sysids.valid(wanted) else "another vehicle's sysid")
+        store.set(sysids.NAME, use, force=True)
+
+
+def _vet_sysid(nodes: list[VehicleNode], index: int, name: str, value: float) -> str | None:
+    if name != sysids.NAME:
+        return None
+    return sysids.clash(index, value, [n.sysid for n in nodes], [n.params.get(sysids.NAME) for n in nodes])
+
+
 def build_vehicle(index: int, config: Config, clock, channels: list[Channel], wake: Callable[[Channel], None],
                   errors, signing: SigningManager, backend=None, services=None,
-                  overrides=None, producers: dict | None = None) -> VehicleNode:
-    """One vehicle node with its parameters, autopilot, services (SERVICES) and tables."""
+                  overrides=None, producers: dict | None = None, sysid: int | None = None) -> VehicleNode:
+    """One vehicle node with its parameters, autopilot, services (SERVICES) and tables; `sysid`:
+    the one a swarm planned for it (params/sysids.py)."""
     services = SERVICES if services is None else services
     overrides = OVERRIDES if overrides is None else overrides
     vcfg = config.vehicle
@@ -179,6 +212,7 @@ def build_vehicle(index: int, config: Config, clock, channels: list[Channel], wa
     ))
     param_service = ParamService(None, store, state_dir / "mav.parm", now)
     param_service.load(config.params_file)
+    _start_sysid(index, config, store, sysid)
     # write-behind of mav.parm: coalesced, on a worker thread, flushed by close()
     writer = WriteBehind(param_service.save_path, param_service, clock.now, errors=errors)
     param_service.on_dirty = writer.kick
@@ -250,11 +284,20 @@ def build(gcs, channels, backend=None, producers: dict | None = None) -> None:
     gcs.tlog = TlogWriter(config.log.tlog) if config.log.tlog else None
     # the HTTP API's own channel comes after the configured ones (gcsd.http.wiring)
     gcs.channels = [channel(gcs, i, c) for i, c in enumerate([*channels, *http_wiring.channel_configs(config)])]
+    count = config.vehicle.count
+    planned = sysids.start_sysids([config.vehicle.sysid + i for i in range(count)],
+                                  [_saved_sysid(config, i) for i in range(count)]) if count > 1 else [None]
     gcs.nodes = [
         build_vehicle(i, config, clock, gcs.channels, functools.partial(gcs.wake_node, i), errors,
-                      gcs.signing_manager, backend=None if backend is None else backend(i), producers=producers)
-        for i in range(config.vehicle.count)
+                      gcs.signing_manager, backend=None if backend is None else backend(i), producers=producers,
+                      sysid=planned[i])
+        for i in range(count)
     ]
+    if count > 1:  # a swarm refuses a SYSID_THISMAV another vehicle has (params/sysids.py)
+        for i, node in enumerate(gcs.nodes):
+            for service in node.services:
+                if isinstance(service, ParamService):
+                    service.vet = functools.partial(_vet_sysid, gcs.nodes, i)
     gcs.router = Router({(n.sysid, c) for n in gcs.nodes for c in (n.compid, *n.local_compids)},
                         [ch.policy for ch in gcs.channels],
                         RouteTable(route_capacity((c.type for c in config.channels), MAX_ROUTES)))

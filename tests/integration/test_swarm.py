@@ -50,3 +50,54 @@ def test_one_udp_server_shows_twenty_systems_and_each_answers_only_for_itself(da
     assert armed == {3}
     assert (tmp_path / "state" / "vehicle-7" / "mav.parm").read_text().count("WPNAV_SPEED") == 1
     assert "WPNAV_SPEED" not in (tmp_path / "state" / "vehicle-8" / "mav.parm").read_text()
+
+
+def _heartbeat_sysids(gcs, seconds: float = 2.5) -> set[int]:
+    gcs.heartbeat()
+    mark = gcs.mark()
+    pump([gcs], seconds)
+    return {r.src[0] for r in gcs.since(mark, "HEARTBEAT")}
+
+
+def _set(gcs, sysid: int, name: str, value: float):
+    """PARAM_SET to a vehicle: its PARAM_VALUE answer (and the STATUSTEXTs meanwhile)."""
+    mark = gcs.mark()
+    gcs.send(M.MAVLink_param_set_message(sysid, 1, name.encode(), value, M.MAV_PARAM_TYPE_REAL32))
+    echo = wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and _name(r.msg.param_id) == name, 3.0, mark)
+    pump([gcs], 0.2)
+    return echo, [r.msg.text for r in gcs.since(mark, "STATUSTEXT") if r.src == (sysid, 1)]
+
+
+def test_a_swarm_refuses_a_sysid_another_vehicle_has_and_a_saved_clash_falls_back(daemon, client, tmp_path, capfd):
+    """Issue 17, item 9: SYSID_THISMAV 2 on vehicle 1 of three used to be taken, and after a
+    restart two vehicles answered as 2 and vehicle 1 was gone."""
+    conf = {"vehicle": {"count": 3}, "state_dir": str(tmp_path / "st"), "channels": [udp_channel("gcs")]}
+    d = daemon(conf)
+    gcs = client(udp_url(d.port("gcs")))
+    assert _heartbeat_sysids(gcs) == {1, 2, 3}
+    echo, texts = _set(gcs, 1, "SYSID_THISMAV", 2.0)
+    assert echo.src == (1, 1) and echo.msg.param_value == 1.0, "refused: the old value back"
+    assert "SYSID_THISMAV 2 refused: another vehicle's sysid" in texts
+    echo, _ = _set(gcs, 3, "SYSID_THISMAV", 7.0)  # the control: a free sysid is taken (next start)
+    assert echo.src == (3, 1) and echo.msg.param_value == 7.0
+    echo, texts = _set(gcs, 1, "SYSID_THISMAV", 7.0)  # vehicle 3's from its next start
+    assert echo.msg.param_value == 1.0 and any("refused" in t for t in texts)
+    echo, _ = _set(gcs, 1, "WPNAV_SPEED", 777.0)
+    assert echo.msg.param_value == 777.0
+    d.stop()
+
+    d = daemon(conf)
+    gcs = client(udp_url(d.port("gcs")))
+    assert _heartbeat_sysids(gcs) == {1, 2, 7}
+    d.stop()
+    saved = tmp_path / "st" / "vehicle-1" / "mav.parm"  # a clash saved by an older gcsd
+    saved.write_text(saved.read_text() + "SYSID_THISMAV 2\n")
+    capfd.readouterr()
+    d = daemon(conf)
+    gcs = client(udp_url(d.port("gcs")))
+    assert _heartbeat_sysids(gcs) == {1, 2, 7}, "vehicle 1 falls back to its configured sysid"
+    assert "sysid_fallback" in capfd.readouterr().out
+    mark = gcs.mark()
+    gcs.send(M.MAVLink_param_request_read_message(1, 1, b"WPNAV_SPEED", -1))
+    kept = wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and r.src == (1, 1), 3.0, mark)
+    assert kept is not None and kept.msg.param_value == 777.0, "nothing else of vehicle 1 is lost"

@@ -18,8 +18,10 @@
   with a STATUSTEXT and the old value sent back to the requester. Any other finite value is
   stored, also outside the documented range, as ArduPilot's GCS_Param.cpp does (the range is
   advice for ground stations; what acts on a parameter clamps it, ParamStore.clamped, and the
-  pre-arm checks report the dangerous ones). A change is saved and confirmed with PARAM_VALUE
-  on every active, non-private channel. (PARAM_VALUE carries the parameter's real index; ArduPilot sends 65535 there.)
+  pre-arm checks report the dangerous ones). A value `vet` refuses (the composition root's
+  check that SYSID_THISMAV stays distinct across a swarm, params/sysids.py) is answered as a
+  read-only parameter is: its reason as STATUSTEXT and the old value back. A change is saved and
+  confirmed with PARAM_VALUE on every active, non-private channel. (PARAM_VALUE carries the parameter's real index; ArduPilot sends 65535 there.)
 - Persistence, write-behind: `mav.parm` in the vehicle's state directory holds the values that
   differ from their defaults. A change only marks the service dirty (`mark_dirty`, and the
   `on_dirty` hook tells the I/O adapter, gcsd.persist.WriteBehind). The file is due at
@@ -50,7 +52,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..config import ConfigError
 from ..config_schema import DATAGRAM_TYPES
-from ..params import ParamEntry, ParamStore, SetResult, as_float
+from ..params import ParamEntry, ParamStore, SetResult, as_float, to_type
 from ..params.parmfile import format_parm, read_parm, read_parm_lines
 from ..params.store import REAL32, TYPE_RANGE, fits_real32
 from . import Incoming, Service
@@ -77,6 +79,7 @@ class ParamService(Service):
         self._last_write_s = -math.inf
         self._failing = False  # the last write failed (reported once until one succeeds)
         self.on_dirty: Callable[[], None] = lambda: None  # the I/O adapter's wake-up (persist.py)
+        self.vet: Callable[[str, float], str | None] = lambda name, value: None  # why a write is refused
 
     # --- loading -----------------------------------------------------------------------------
     def load(self, params_file: Path | None) -> None:
@@ -150,8 +153,15 @@ class ParamService(Service):
             self.ctx.text(M.MAV_SEVERITY_ERROR, "Param save failed")
         self.mark_dirty()
 
+    def _refusal(self, name: str, value: float) -> str | None:
+        if name not in self.store or not math.isfinite(value):
+            return None
+        return self.vet(name, to_type(self.store.definition(name).ptype, value))
+
     def set_from_file(self, name: str, value: float, save: bool = True) -> bool:
-        """Set a parameter uploaded as a file (FTP param.pck): no echo, read-only refused."""
+        """Set a parameter uploaded as a file (FTP param.pck): no echo, read-only and vetoed refused."""
+        if self._refusal(name, value) is not None:
+            return False
         result = self.store.set(name, value)
         if result is SetResult.CHANGED and save:
             self.mark_dirty()
@@ -182,12 +192,14 @@ class ParamService(Service):
 
     def handle_PARAM_SET(self, inc: Incoming) -> None:
         name = _name(inc.msg.param_id)
-        result = self.store.set(name, inc.msg.param_value)
+        refused = self._refusal(name, inc.msg.param_value)
+        result = SetResult.READ_ONLY if refused else self.store.set(name, inc.msg.param_value)
         if result in (SetResult.UNKNOWN, SetResult.INVALID):
             return
         entry = self.store.entry_by_name(name)
         if result is SetResult.READ_ONLY:
-            self.ctx.text(M.MAV_SEVERITY_WARNING, f"Param write denied ({name})", channels={inc.channel.index})
+            why = refused or f"Param write denied ({name})"
+            self.ctx.text(M.MAV_SEVERITY_WARNING, why, channels={inc.channel.index})
             self.ctx.reply(inc.channel, self._value_msg(entry))
             return
         if result is SetResult.CHANGED:
