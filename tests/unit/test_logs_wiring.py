@@ -62,3 +62,8 @@ def test_the_tap_answers_a_flight_controllers_heartbeat_with_a_start(tmp_path):
         "REMOTE_LOG_BLOCK_STATUS", SEQ_START, 1, 1)
     assert (msg.get_srcSystem(), msg.get_srcComponent()) == (node.sysid, node.compid)
 
+
+
+def test_simulated_false_leaves_the_simulated_vehicle_without_a_log(tmp_path):
+    _, logs, _, _ = build(tmp_path, "copter", {"simulated": False})
+    assert logs.recorder is None and not hasattr(logs, "tap")
