@@ -291,7 +291,7 @@ async def test_the_simulation_steps_with_no_link_up(tmp_path):
         deadline = time.monotonic() + 5.0
         while backend.calls < 20 and time.monotonic() < deadline and not runner.done():
             await asyncio.sleep(0.05)
-        assert not gcs.opened, "the link never came up"
+        assert 0 not in gcs.opened, "the fc link never came up"  # (the API's http channel is open)
         assert backend.calls >= 20, "the autopilot and its backend tick whether or not a link is up"
     finally:
         stop.set()
