@@ -219,3 +219,32 @@ def test_a_system_time_going_back_means_a_reboot_and_a_start():
     c.handle_heartbeat(CH, 1, 1, 3, 0.0)
     assert c.handle_system_time(1, 50_000, 0.5) == []
     assert c.handle_system_time(1, 200, 0.6) == [Status(CH, 1, 1, SEQ_START, 1)]
+
+
+class StreamingSource(LogSource):
+    """Log data produced only while the flight controller streams (its START may be lost too)."""
+
+    def __init__(self, h: Harness, seconds: float = 60.0) -> None:
+        super().__init__(seconds)
+        self.h = h
+
+    def take(self, n: int) -> bytes:
+        return super().take(n) if self.h.fc.streaming else b""
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_third_of_everything_lost_both_ways_still_gives_byte_identical_logs(seed):
+    h = Harness(loss=0.3, ack_loss=0.3, seed=seed)
+    h.run(2.0)
+    src = StreamingSource(h)
+    h.run(3.0, produce_bytes_per_s=20_000, source=src)
+    h.run(6.0)  # a pause
+    h.run(2.0, produce_bytes_per_s=20_000, source=src)
+    h.run(3.0)
+    first = h.fc.logged
+    h.fc.reboot()
+    h.run(3.0)
+    h.run(3.0, produce_bytes_per_s=20_000, source=StreamingSource(h, 30.0))
+    h.run(4.0)
+    assert h.fc.dropped_bytes == 0 and len(first) > 40_000 and len(h.fc.logged) > 20_000
+    assert [bytes(h.files[k]) for k in h.order] == [first, h.fc.logged]
