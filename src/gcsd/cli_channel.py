@@ -61,12 +61,7 @@ def run(args: argparse.Namespace) -> int:
 def _act(args: argparse.Namespace, socket_path: Path) -> int:
     if args.action == "list":
         status = control.query(socket_path)
-        if args.json:
-            print(json.dumps(status["channels"], indent=2))
-        else:
-            rows = [f"{c['name']}  {c['type']}  {c.get('address', '')}  peers {c.get('peers', 0)}"
-                    for c in status["channels"]]
-            print("\n".join(rows))
+        print(json.dumps(status["channels"], indent=2) if args.json else control.format_channels(status))
         return EXIT_OK
     if args.action == "add":
         spec = {"name": args.name, "type": args.type}

@@ -251,20 +251,26 @@ def _duration(seconds: float) -> str:
     return f"{hours} h {m} min"
 
 
-def format_status(status: dict, daemon: dict | None = None) -> str:
-    """The status document as titled tables; units in the headers (pkt/s, B, s)."""
-    chans = status.get("channels", [])
+def format_channels(status: dict) -> str:
+    """The Channels table of `gcsd status` (also `gcsd channel list`)."""
     channels = [
         [c["name"], c["type"], c.get("address", ""), c.get("peers", 0), f'{c.get("rate_in", 0):.0f}',
          f'{c.get("rate_out", 0):.0f}', c.get("packets_in", 0), c.get("packets_out", 0), c.get("bytes_in", 0),
          c.get("bytes_out", 0)]
-        for c in chans
+        for c in status.get("channels", [])
     ]
+    return _table("Channels", ["channel", "type", "address", "peers", "in (pkt/s)", "out (pkt/s)", "in (pkt)",
+                               "out (pkt)", "in (B)", "out (B)"], channels)
+
+
+def format_status(status: dict, daemon: dict | None = None) -> str:
+    """The status document as titled tables; units in the headers (pkt/s, B, s)."""
+    chans = status.get("channels", [])
     problems = [
         [c["name"], c.get("parse_errors", 0), c.get("crc_errors", 0), c.get("unknown_ids", 0), c.get("seq_gaps", 0),
          c.get("drops", 0), c.get("signature_rejects", 0), c.get("peers_forgotten", 0), c.get("peers_replaced", 0),
          c.get("filtered_in", 0), c.get("filtered_out", 0), c.get("rate_limited", 0), c.get("duplicates", 0),
-         c.get("muted", 0), *(c.get(key, 0) for key, _ in _DROP_COLUMNS)]
+         c.get("muted", 0), c.get("open_failures", 0), *(c.get(key, 0) for key, _ in _DROP_COLUMNS)]
         for c in chans
     ]
     routes = [[r["sysid"], r["compid"], mav_type_name(r.get("mavtype")), r["channel"], f'{r["age_s"]:.1f}']
@@ -279,13 +285,13 @@ def format_status(status: dict, daemon: dict | None = None) -> str:
     parts = [
         head,
         "",
-        _table("Channels", ["channel", "type", "address", "peers", "in (pkt/s)", "out (pkt/s)", "in (pkt)",
-                            "out (pkt)", "in (B)", "out (B)"], channels),
+        format_channels(status),
         "",
         _table("Channel errors and drops (counts)", ["channel", "parse", "bad CRC", "unknown id", "seq gaps",
                                                      "drops", "signing rejects", "peers expired",
                                                      "peers replaced", "filtered in", "filtered out",
-                                                     "rate limited", "duplicates", "muted", *(h for _, h in _DROP_COLUMNS)],
+                                                     "rate limited", "duplicates", "muted", "open failures",
+                                                     *(h for _, h in _DROP_COLUMNS)],
                problems),
         "",
         _table("Routes learned", ["sysid", "compid", "MAV_TYPE", "via channel", "last heard (s ago)"], routes),

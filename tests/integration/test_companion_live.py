@@ -99,6 +99,9 @@ def test_channel_add_and_remove_at_run_time_leave_the_other_channels_alone(daemo
     assert _max_gap_s(station, mark) < GAP_LIMIT_S
     listed = _cli("channel", "list", "-c", str(conf), "--json")
     assert [c["name"] for c in json.loads(listed.stdout)] == ["gcs", "http"]  # http: the API's own channel
+    table = _cli("channel", "list", "-c", str(conf)).stdout.splitlines()
+    assert table[0] == "Channels" and table[1].split()[:3] == ["channel", "type", "address"]
+    assert [row.split()[0] for row in table[3:]] == ["gcs", "http"]
 
 
 def test_channels_added_at_run_time_are_restored_at_the_next_start(daemon, client, tmp_path):
