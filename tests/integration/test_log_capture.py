@@ -16,7 +16,7 @@ from fake_logger_fc import FakeLoggerFC
 from gcsd.logs.simlog import FlightRecorder
 from gcsd.sim.state import VehicleState
 
-from .helpers import M, pump, udp_channel, udp_url
+from .helpers import M, pump, udp_channel, udp_url, wait_for
 
 COMPANION = (1, 191)
 FC, FC_LOG = (1, 1), 155
@@ -103,3 +103,20 @@ def test_a_streamed_log_is_captured_byte_for_byte_through_loss_a_pause_and_a_reb
         assert {"FMT", "PARM", "GPS", "ATT"} <= kinds
     counters = d.status()["counters"]
     assert counters["logs_capture_logs"] == 2 and counters["logs_capture_recovered"] > 0
+    # served by the companion's own component; a request for component 0 is the flight
+    # controller's (same sysid) and gets nothing from the companion
+    gcs = client(udp_url(d.port("gcs")))
+    gcs.heartbeat()
+    mark = gcs.mark()
+    gcs.send(M.MAVLink_log_request_list_message(COMPANION[0], 0, 0, 0xFFFF))
+    beat = wait_for(gcs, lambda r: r.type == "HEARTBEAT" and r.src == COMPANION, timeout=3.0, since=mark)
+    assert beat is not None  # the companion is alive and talking to this station
+    pump([gcs], 0.5)
+    assert gcs.since(mark, "LOG_ENTRY") == []
+    mark = gcs.mark()
+    gcs.send(M.MAVLink_log_request_list_message(*COMPANION, 0, 0xFFFF))
+    assert wait_for(gcs, lambda r: r.type == "LOG_ENTRY" and r.msg.id == 2, since=mark) is not None
+    pump([gcs], 0.3)
+    entries = [r.msg for r in gcs.since(mark, "LOG_ENTRY")]
+    assert [(e.id, e.num_logs, e.size) for e in entries] == [(1, 2, len(log1)), (2, 2, len(log2))]
+    assert all(r.src == COMPANION for r in gcs.since(mark, "LOG_ENTRY"))

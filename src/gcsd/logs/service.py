@@ -1,7 +1,9 @@
 """Flight logs on a node: the thin adapter between the node and the pure cores.
 
 - **Serving** (transfer.py): LOG_REQUEST_LIST, LOG_REQUEST_DATA, LOG_REQUEST_END and LOG_ERASE
-  from a ground station start or end that requester's `LogTransfer` (at most MAX_TRANSFERS, the
+  from a ground station (addressed to this vehicle, component 0 included; on a companion computer,
+  which shares its sysid with the flight controller, to its own component only, so the two never
+  both answer) start or end that requester's `LogTransfer` (at most MAX_TRANSFERS, the
   oldest idle one makes room). While the vehicle is armed they are ignored, with one "Disarm for
   log download" STATUSTEXT, as ArduPilot. LOG_ENTRY and LOG_DATA go out in the node's send pass
   (`pending`), at most PACKETS_PER_PASS per pass, only while the link's byte budget has room,
@@ -66,8 +68,10 @@ class _Served:
 
 
 class FlightLogService(Service):
-    def __init__(self, node, store: LogStore, simulated: bool, capture: Capture | None) -> None:
+    def __init__(self, node, store: LogStore, simulated: bool, capture: Capture | None,
+                 exact_component: bool = False) -> None:
         self.node = node
+        self.exact_component = exact_component  # a companion: only requests addressed to its compid
         self.store = store
         self.capture = capture
         self.recorder = FlightRecorder(node.vehicle.modes) if simulated else None
@@ -106,7 +110,10 @@ class FlightLogService(Service):
         return served
 
     def _for_us(self, msg) -> bool:
-        return msg.target_system in (0, self.node.sysid) and msg.target_component in (0, self.node.compid)
+        compid = self.node.compid
+        if self.exact_component:
+            return msg.target_system == self.node.sysid and msg.target_component == compid
+        return msg.target_system in (0, self.node.sysid) and msg.target_component in (0, compid)
 
     def handle_LOG_REQUEST_LIST(self, inc: Incoming) -> None:
         if not self._for_us(inc.msg) or (served := self._transfer(inc)) is None:

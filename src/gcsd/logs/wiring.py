@@ -30,4 +30,6 @@ def flight_log_service(node, config) -> FlightLogService:
         channels = frozenset(i for i, c in enumerate(config.channels) if c.name in names) if names else None
         capture = Capture(node.sysid, node.compid, channels)
     simulated = fl.simulated and node.autopilot.simulated and node.vehicle.can_arm
-    return FlightLogService(node, store, simulated, capture)
+    # a vehicle that cannot arm is a companion computer: it answers only its own component, never
+    # a request the flight controller it sits beside (same sysid, component 0 or 1) should answer
+    return FlightLogService(node, store, simulated, capture, exact_component=not node.vehicle.can_arm)
