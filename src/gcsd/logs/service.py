@@ -61,7 +61,7 @@ class LogCounters:
 @dataclass
 class _Served:
     transfer: LogTransfer
-    channel: object
+    channel_index: int  # the requester's channel (by slot: a channel reopened in place keeps it)
     window: tuple[str, int, bytes] = ("", 0, b"")  # name, offset, data read ahead
     next_send_s: float = 0.0
     touched_s: float = 0.0
@@ -105,7 +105,7 @@ class FlightLogService(Service):
             if len(self._served) >= MAX_TRANSFERS:
                 oldest = min(self._served, key=lambda k: (self._served[k].transfer.busy, self._served[k].touched_s))
                 del self._served[oldest]
-            served = self._served[key] = _Served(LogTransfer(), inc.channel)
+            served = self._served[key] = _Served(LogTransfer(), inc.channel.index)
         served.touched_s = inc.now
         return served
 
@@ -144,7 +144,7 @@ class FlightLogService(Service):
     def pending(self, channel, now: float, send) -> float | None:
         deadline = self.tick(now)
         for served in self._served.values():
-            if served.channel is not channel or not served.transfer.busy:
+            if served.channel_index != channel.index or not served.transfer.busy:
                 continue
             due = self._pump(served, channel, now, send)
             if due is not None:
