@@ -131,10 +131,17 @@ def in_range(name: str):
 
 
 def out_of_range(name: str):
+    """A value outside the metadata range that its C type still holds (ArduPilot stores it)."""
     d = DEFS[name]
-    above = None if d.max is None else d.max + max(1.0, abs(d.max))
-    below = None if d.min is None else d.min - max(1.0, abs(d.min))
-    return st.sampled_from([v for v in (above, below) if v is not None] or [0.0])
+    type_lo, type_hi = TYPE_RANGE[d.ptype]
+    values = []
+    if d.max is not None and d.max + 1 <= type_hi:
+        values.append(min(type_hi, d.max + max(1.0, abs(d.max))))
+    if d.min is not None and d.min - 1 >= type_lo:
+        values.append(max(type_lo, d.min - max(1.0, abs(d.min))))
+    if d.ptype != REAL32:
+        values = [float(math.floor(v)) if v > 0 else float(math.ceil(v)) for v in values]
+    return st.sampled_from(values or [0.0])
 
 
 has_range = [n for n in WRITTEN if DEFS[n].min is not None or DEFS[n].max is not None]

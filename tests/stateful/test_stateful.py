@@ -96,7 +96,7 @@ PENDING = {
     "sighup": "issue #17 item 10: SIGHUP kills the daemon without a clean stop",
     "idle_tcp_flood": "issue #17 item 3: unauthenticated TCP connections exhaust the descriptors",
 }
-ENABLED = {"future_setup_signing", "overflowing_setup_signing"}  # PENDING items whose fixes are on main
+ENABLED = set(PENDING)  # every item's fix is on main (a rule for a new one starts in PENDING only)
 
 _deadline = [0.0]
 
@@ -554,6 +554,7 @@ def test_gcsd_under_random_interleavings():
         phases=[Phase.explicit, Phase.generate], suppress_health_check=list(HealthCheck)))
 
 
-@pytest.mark.parametrize("name", sorted(set(PENDING) - ENABLED))
-def test_pending_rule(name):
-    pytest.skip(f"rule {name} waits for its fix: {PENDING[name]}")
+if set(PENDING) - ENABLED:
+    @pytest.mark.parametrize("name", sorted(set(PENDING) - ENABLED))
+    def test_pending_rule(name):
+        pytest.skip(f"rule {name} waits for its fix: {PENDING[name]}")
