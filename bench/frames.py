@@ -124,3 +124,22 @@ def walk_frames(data, n: int):
 
 def seq_of(data, payload_offset: int) -> int:
     return int(_unpack_f(data, payload_offset)[0])
+
+
+def received_frames(sock, buf: bytearray, timeout_s: float):
+    """Yield (sysid, msgid, payload_offset, payload_len) for every MAVLink2 frame in the datagrams
+    that arrive on `sock` within one wait (`buf` holds the current datagram while it is walked)."""
+    import select
+    import socket
+
+    if not select.select([sock], [], [], timeout_s)[0]:
+        return
+    while True:
+        try:
+            n = sock.recv_into(buf, 0, socket.MSG_DONTWAIT)
+        except (BlockingIOError, ConnectionRefusedError):
+            return
+        for sysid, msgid, off in walk_frames(buf, n):
+            if sysid is None:
+                break
+            yield sysid, msgid, off, buf[off - 9]

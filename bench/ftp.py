@@ -54,7 +54,7 @@ if __package__ in (None, ""):  # run as a script: python bench/ftp.py
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from bench import mavsdk_peer, report
-from bench.frames import walk_frames
+from bench.frames import received_frames, walk_frames
 from bench.routers import Launched, _launch, free_udp_port, gcsd_config
 
 THIS = Path(__file__).resolve()
@@ -139,18 +139,10 @@ class FtpClient:
 
     def replies(self, timeout_s: float):
         """FTP payload headers (and data) from the vehicle in the datagrams of one wait."""
-        if not select.select([self.sock], [], [], timeout_s)[0]:
-            return
-        while True:
-            try:
-                n = self.sock.recv_into(self.buf, 0, socket.MSG_DONTWAIT)
-            except (BlockingIOError, ConnectionRefusedError):
-                return
-            for sysid, msgid, off in walk_frames(self.buf, n):
-                if msgid == MSGID_FTP and sysid == VEHICLE[0]:
-                    plen = self.buf[off - 9]  # MAVLink2: we speak it, so the server does
-                    body = bytes(self.buf[off + 3:off + plen]).ljust(251, b"\0")
-                    yield HDR.unpack_from(body), body[12:]
+        for sysid, msgid, off, plen in received_frames(self.sock, self.buf, timeout_s):
+            if msgid == MSGID_FTP and sysid == VEHICLE[0]:  # MAVLink2: we speak it, so the server does
+                body = bytes(self.buf[off + 3:off + plen]).ljust(251, b"\0")
+                yield HDR.unpack_from(body), body[12:]
 
     def connect(self, timeout_s: float = 20.0) -> None:
         hb = mavlink2.MAVLink_heartbeat_message(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID,

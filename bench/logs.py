@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import select
 import socket
 import statistics
 import struct
@@ -47,7 +46,7 @@ if __package__ in (None, ""):  # run as a script: python bench/logs.py
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from bench import report
-from bench.frames import walk_frames
+from bench.frames import received_frames
 from bench.routers import Launched, cpu_seconds, free_udp_port, gcsd_config, start_gcsd
 
 TEN_MB = 10_000_000
@@ -103,18 +102,8 @@ class Peer:
 
     def frames(self, timeout_s: float):
         """(sysid, msgid, payload bytes padded to 255) of every frame that arrives in one wait."""
-        if not select.select([self.sock], [], [], timeout_s)[0]:
-            return
-        while True:
-            try:
-                n = self.sock.recv_into(self.buf, 0, socket.MSG_DONTWAIT)
-            except (BlockingIOError, ConnectionRefusedError):
-                return
-            for sysid, msgid, off in walk_frames(self.buf, n):
-                if sysid is None:
-                    break
-                plen = self.buf[off - 9]
-                yield sysid, msgid, bytes(self.buf[off:off + plen]).ljust(255, b"\0")
+        for sysid, msgid, off, plen in received_frames(self.sock, self.buf, timeout_s):
+            yield sysid, msgid, bytes(self.buf[off:off + plen]).ljust(255, b"\0")
 
     def close(self) -> None:
         self.sock.close()
