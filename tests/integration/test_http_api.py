@@ -306,3 +306,35 @@ def test_a_taken_port_does_not_stop_the_daemon_and_is_tried_again(daemon, client
         holder.close()
     assert poll(lambda: d.gcs.http.address == ("127.0.0.1", port), timeout=8.0)
     assert call(f"http://127.0.0.1:{port}/v1/status")[0] == 200
+
+
+def test_websocket_clients_are_bounded(api):
+    import asyncio
+
+    import aiohttp
+
+    from gcsd.http.routes import MAX_WEBSOCKETS
+
+    _, url, _ = api
+    ws_url = url.replace("http://", "ws://") + "/v1/ws/mavlink?filter=^HEARTBEAT$"
+
+    async def body():
+        async with aiohttp.ClientSession() as session:
+            sockets = [await session.ws_connect(ws_url) for _ in range(MAX_WEBSOCKETS)]
+            with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
+                await session.ws_connect(ws_url)
+            await sockets.pop().close()
+            for _ in range(50):  # the server sees the close, then takes a new one
+                try:
+                    sockets.append(await session.ws_connect(ws_url))
+                    break
+                except aiohttp.WSServerHandshakeError:
+                    await asyncio.sleep(0.05)
+            taken = len(sockets)
+            for ws in sockets:
+                await ws.close()
+            return refused.value.status, taken
+
+    status, taken = asyncio.run(body())
+    assert status == 503 and taken == MAX_WEBSOCKETS
+    assert call(f"{url}/v1/status")[0] == 200

@@ -12,17 +12,18 @@ Routes (each mavlink2rest route is also served without `/v1`, as mavlink2rest do
   GET  /v1/ws/mavlink?filter=RE    WebSocket: frames out (gcsd.http.hub), messages in
   GET  /info                       mavlink2rest's service description (name "gcsd")
   GET  /v1/status                  `gcsd status --json`'s document
-  GET  /v1/ws/status               WebSocket: the same document every STATUS_PERIOD_S (the page's)
+  GET  /v1/ws/status               WebSocket: the same document every second (gcsd.http.statuspage)
   GET  /v1/vehicles/{sysid}/parameters[/{NAME}], PUT .../parameters/{NAME} {"value": n}
   GET/PUT /v1/vehicles/{sysid}/mission   a QGroundControl .plan (gcsd.http.plan)
   POST /v1/vehicles/{sysid}/mode {"mode": NAME}, .../arm {}, .../disarm {}
   GET  /v1/logs, /v1/logs/{id}[?sysid=S]   the flight logs (gcsd.logs.listing), one log's file
-  GET  /, /favicon.ico             the status page (gcsd/http/page)
+  GET  /, /favicon.ico             the status page (gcsd.http.statuspage)
 
 Errors are JSON `{"error": "..."}`: 400 malformed JSON or a bad message, 404 an unknown route,
 path, message name, vehicle or parameter, 405 a wrong method, 413 a body over MAX_BODY_BYTES,
 422 a value of the wrong type or range, an unknown mode or a bad plan, 409 a command the vehicle
-refused, 504 no answer from it. An exception in a handler is counted (`http` in the daemon's
+refused, 503 beyond MAX_WEBSOCKETS WebSocket clients, 504 no answer from a vehicle. An exception
+in a handler is counted (`http` in the daemon's
 error counts) and answered 500; the daemon goes on. With `http.token_file`, every request but the
 favicon needs `Authorization: Bearer TOKEN` or `?token=TOKEN` (a browser's WebSocket cannot set
 headers); without it: 401 with `WWW-Authenticate: Bearer`. CORS is permissive, as mavlink2rest's.
@@ -35,11 +36,11 @@ import hmac
 import json
 import math
 import re
-from importlib import resources
 from typing import Protocol
 
 from aiohttp import WSMsgType, web
 
+from . import statuspage
 from .hub import Hub
 from .mavjson import BadMessage, UnknownMessage, parse_envelope, template
 from .plan import PlanError
@@ -47,7 +48,7 @@ from .tree import MessageTree
 
 MAX_BODY_BYTES = 1 << 20
 API = web.AppKey("api", object)
-STATUS_PERIOD_S = 1.0
+MAX_WEBSOCKETS = 64  # a client opening more gets 503: the daemon's work stays bounded
 API_VERSION = 0
 
 
@@ -121,7 +122,6 @@ def build_app(api: Api, token: str | None = None) -> web.Application:
         r.add_get(prefix + "/ws/mavlink", websocket)
     r.add_get("/info", info)
     r.add_get("/v1/status", status)
-    r.add_get("/v1/ws/status", status_ws)
     r.add_get("/v1/vehicles/{sysid}/parameters", parameters)
     r.add_get("/v1/vehicles/{sysid}/parameters/{name}", parameter)
     r.add_put("/v1/vehicles/{sysid}/parameters/{name}", parameter_put)
@@ -132,8 +132,7 @@ def build_app(api: Api, token: str | None = None) -> web.Application:
     r.add_post("/v1/vehicles/{sysid}/disarm", disarm)
     r.add_get("/v1/logs", logs)
     r.add_get("/v1/logs/{id}", log_file)
-    r.add_get("/", page)
-    r.add_get("/favicon.ico", favicon)
+    statuspage.install(app, lambda: api.status())  # /, /favicon.ico, /v1/ws/status
     return app
 
 
@@ -232,6 +231,8 @@ async def info(request: web.Request) -> web.Response:
 
 async def websocket(request: web.Request) -> web.StreamResponse:
     api: Api = request.app[API]
+    if len(api.hub.subscribers) >= MAX_WEBSOCKETS:
+        raise RequestFailed(503, f"{MAX_WEBSOCKETS} WebSocket clients already; try again later")
     try:
         sub = api.hub.subscribe(request.query.get("filter", ".*"))
     except re.error as exc:
@@ -271,28 +272,6 @@ async def _drain(sub, ws: web.WebSocketResponse) -> None:
 
 async def status(request: web.Request) -> web.Response:
     return _json(request.app[API].status())
-
-
-async def status_ws(request: web.Request) -> web.StreamResponse:
-    ws = web.WebSocketResponse(heartbeat=30.0)
-    await ws.prepare(request)
-    api: Api = request.app[API]
-
-    async def push() -> None:
-        try:
-            while not ws.closed:
-                await ws.send_str(json.dumps(api.status(), default=str))
-                await asyncio.sleep(STATUS_PERIOD_S)
-        except ConnectionError:
-            pass
-
-    sender = asyncio.create_task(push())
-    try:
-        async for _frame in ws:
-            pass  # nothing is taken on this socket
-    finally:
-        sender.cancel()
-    return ws
 
 
 def _vehicle(request: web.Request) -> Vehicle:
@@ -380,17 +359,3 @@ async def log_file(request: web.Request) -> web.StreamResponse:
     if path is None:
         raise RequestFailed(404, f"no log {request.match_info['id']}")
     return web.FileResponse(path, headers={"Content-Type": "application/octet-stream"})
-
-
-# --- the page --------------------------------------------------------------------------------
-
-def _asset(name: str) -> bytes:
-    return resources.files("gcsd.http").joinpath("page", name).read_bytes()
-
-
-async def page(request: web.Request) -> web.Response:
-    return web.Response(body=_asset("index.html"), content_type="text/html", charset="utf-8")
-
-
-async def favicon(request: web.Request) -> web.Response:
-    return web.Response(body=_asset("favicon.svg"), content_type="image/svg+xml")
