@@ -15,7 +15,7 @@ from urllib.parse import urlparse
 
 import pytest
 
-from .helpers import udp_channel
+from .helpers import VEHICLE, is_type, udp_channel, udp_url, wait_for
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
@@ -76,14 +76,19 @@ def requests_made(driver) -> list[str]:
     return urls
 
 
-def test_page_shows_channels_live_offline_and_without_console_errors(daemon, browser):
+def test_page_shows_channels_live_offline_and_without_console_errors(daemon, browser, client):
     d = daemon({"channels": [udp_channel("gcs"), udp_channel("telem2")]})
     url = d.http_url()
+    station = client(udp_url(d.port("gcs")))
+    station.heartbeat()
+    assert wait_for(station, is_type("HEARTBEAT", VEHICLE))
     browser.get(url + "/")
     assert browser.title == "gcsd"
     # the configured channels (and the API's own), from the status WebSocket
     assert wait(lambda: cell(browser, "channels", "telem2", 1) == "udp-server")
     assert cell(browser, "channels", "gcs", 1) == "udp-server" and cell(browser, "channels", "http", 1) == "local"
+    port = station.conn.port.getsockname()[1]
+    assert wait(lambda: cell(browser, "channels", "gcs", 10) == f"127.0.0.1:{port}")  # the station, as a peer
     assert wait(lambda: cell(browser, "vehicles", "1", 3) == "STABILIZE")
     # a value that changes live: the http channel's packets out (our vehicle's telemetry)
     first = int(cell(browser, "channels", "http", 7))

@@ -36,6 +36,7 @@ class HttpService:
         self._runner: web.AppRunner | None = None
         self._closing: set[asyncio.Future] = set()
         self._gcs_status = gcs.status
+        self._channels = gcs.channels  # the daemon's live list (channels come and go at run time)
         self._errors = gcs.errors
         self._now = gcs.clock.now
         self.face = Face(channel, gcs.nodes, self.status, gcs.errors, gcs.clock.now, gcs.clock.wall,
@@ -54,6 +55,9 @@ class HttpService:
     def status(self) -> dict:
         document = self._gcs_status()
         document["http_address"] = None if self.address is None else f"{self.address[0]}:{self.address[1]}"
+        peers = {ch.name: [_peer_name(key) for key in ch.peers] for ch in self._channels}
+        for entry in document["channels"]:  # who each channel serves, for the page
+            entry["peer_addresses"] = peers.get(entry["name"], [])
         return document
 
     def tap(self, channel, frame, now: float) -> None:
@@ -91,3 +95,7 @@ class HttpService:
             self._closing.add(asyncio.ensure_future(runner.cleanup()))
 
         return close, asyncio.get_running_loop().create_future()
+
+
+def _peer_name(key: object) -> str:
+    return f"{key[0]}:{key[1]}" if isinstance(key, tuple) and len(key) == 2 else str(key)
