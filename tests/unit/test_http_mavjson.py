@@ -218,3 +218,12 @@ def test_every_template_reads_back_and_packs(name):
     msg.pack(M.MAVLink(None))
     again = message_json(msg)
     assert parse_message(again).pack(M.MAVLink(None)) == msg.pack(M.MAVLink(None))
+
+
+def test_cockpit_set_position_target_reads():
+    # bluerobotics/cockpit src/libs/vehicle/ardupilot/ardupilot.ts: what it sends to change altitude
+    cockpit = {"time_boot_ms": 0, "type": "SET_POSITION_TARGET_LOCAL_NED", "target_system": 1, "target_component": 1,
+               "coordinate_frame": {"type": "MAV_FRAME_LOCAL_OFFSET_NED"}, "type_mask": {"bits": 0b0000111111111000},
+               "x": 0, "y": 0, "z": -10, "vx": 0, "vy": 0, "vz": 0, "afx": 0, "afy": 0, "afz": 0, "yaw": 0, "yaw_rate": 0}
+    msg = parse_message(cockpit)
+    assert (msg.coordinate_frame, msg.type_mask, msg.z) == (M.MAV_FRAME_LOCAL_OFFSET_NED, 0x0FF8, -10.0)
