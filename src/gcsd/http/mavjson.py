@@ -275,11 +275,17 @@ def _float(raw: object, where: str) -> float:
     return value
 
 
-def _enum(f: FieldSpec, raw: object, where: str) -> int:
+def _unwrap(raw: object, key: str, where: str, shape: str) -> object:
+    """mavlink2rest's wrapped form ({"type": NAME}, {"bits": N}) -> its content; other forms as they are."""
     if isinstance(raw, dict):
-        if set(raw) != {"type"}:
-            raise BadMessage(f'{where}: expected {{"type": "{f.enum}_..."}}')
-        raw = raw["type"]
+        if set(raw) != {key}:
+            raise BadMessage(f"{where}: expected {shape}")
+        return raw[key]
+    return raw
+
+
+def _enum(f: FieldSpec, raw: object, where: str) -> int:
+    raw = _unwrap(raw, "type", where, f'{{"type": "{f.enum}_..."}}')
     if isinstance(raw, str):
         value = _entry_values(f.enum).get(raw)
         if value is None:
@@ -289,10 +295,7 @@ def _enum(f: FieldSpec, raw: object, where: str) -> int:
 
 
 def _bits(f: FieldSpec, raw: object, where: str) -> int:
-    if isinstance(raw, dict):
-        if set(raw) != {"bits"}:
-            raise BadMessage(f'{where}: expected {{"bits": N}}')
-        raw = raw["bits"]
+    raw = _unwrap(raw, "bits", where, '{"bits": N}')
     if isinstance(raw, str):
         values = _entry_values(f.enum)
         total = 0
