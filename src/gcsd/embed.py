@@ -93,15 +93,19 @@ async def serve(config: Config, backend: Backends, stop: asyncio.Event,
 
 
 def run(config: Config, backend: Backends) -> int:
-    """Blocking: serve until SIGINT or SIGTERM; 0 on a clean stop, 1 on a failure."""
+    """Blocking: serve until SIGINT or SIGTERM; 0 on a clean stop, 1 on a failure. SIGHUP writes
+    out changed state (parameters, signing timestamp) and serves on: the configuration is the
+    embedding program's, so nothing is re-read, and a hangup never ends the program."""
 
     async def main() -> int:
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()
         for signum in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(signum, stop.set)
+        running: list[GCS] = []
+        loop.add_signal_handler(signal.SIGHUP, lambda: running and running[0].sync_state())
         try:
-            await serve(config, backend, stop)
+            await serve(config, backend, stop, started=running.append)
         except Exception:
             import structlog
             structlog.get_logger("gcsd.embed").exception("embedded_daemon_failed")

@@ -15,6 +15,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 from gcsd import control
 from gcsd.params.parmfile import read_parm
@@ -25,12 +26,13 @@ from .test_state_lock import wait_answering
 
 
 def events(log_path, name: str) -> int:
+    """How many log records of that event (JSON lines; a console line names the event in its text)."""
     count = 0
     for line in log_path.read_text(errors="replace").splitlines():
         try:
             count += json.loads(line).get("event") == name
         except ValueError:
-            continue
+            count += f" {name} " in line
     return count
 
 
@@ -82,6 +84,32 @@ def test_sighup_keeps_the_daemon_serving_and_writes_out_what_was_acknowledged(tm
         proc.kill()  # no clean stop: what is on disk is what the SIGHUP wrote
         proc.wait(5)
         assert read_parm(tmp_path / "state" / "mav.parm")[0]["RC7_TRIM"] == 1503
+    finally:
+        gcs.close()
+        if proc.poll() is None:
+            stop(proc)
+
+
+def test_sighup_never_ends_an_embedding_program(tmp_path):
+    robot = Path(__file__).resolve().parents[2] / "sitl" / "embed_robot.py"
+    port = free_udp_port()
+    log_path = tmp_path / "robot.log"
+    with log_path.open("wb") as log:
+        proc = subprocess.Popen([sys.executable, str(robot), "--port", str(port), "--state-dir",
+                                 str(tmp_path / "robot")], env=env_with_venv(PYTHONUNBUFFERED="1"), stdout=log,
+                                stderr=subprocess.STDOUT)
+    gcs = Client(f"udpout:127.0.0.1:{port}", 255, 190)
+    try:
+        wait_answering(tmp_path / "robot" / control.SOCKET_NAME, proc)
+        gcs.heartbeat()
+        assert wait_for(gcs, lambda r: r.type == "HEARTBEAT" and r.src == VEHICLE, 5.0), "serving"
+        proc.send_signal(signal.SIGHUP)
+        synced = wait_event(log_path, "state_synced", 1, proc)
+        assert proc.poll() is None, f"SIGHUP ended the program (exit {proc.returncode})"
+        assert synced, "it wrote out its state"
+        mark = gcs.mark()
+        gcs.heartbeat()
+        assert wait_for(gcs, lambda r: r.type == "HEARTBEAT" and r.src == VEHICLE, 3.0, mark), "still serving"
     finally:
         gcs.close()
         if proc.poll() is None:
