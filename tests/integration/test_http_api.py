@@ -100,6 +100,7 @@ def test_helper_and_info(api):
     assert status == 404 and body == {"error": "Invalid message name."}
     status, _, body, _ = call(f"{url}/info")
     assert status == 200 and body["version"] >= 0 and body["service"]["name"] == "gcsd"
+    assert len(body["service"]["sha"]) != 0  # tests/run.py "Test info"
 
 
 def test_posted_arm_takes_effect_for_the_ground_station(api):

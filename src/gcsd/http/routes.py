@@ -226,7 +226,7 @@ async def info(request: web.Request) -> web.Response:
     from .. import __version__
 
     return _json({"version": API_VERSION, "service": {
-        "name": "gcsd", "version": __version__, "sha": "", "build_date": "", "authors": "gcsd"}})
+        "name": "gcsd", "version": __version__, "sha": __version__, "build_date": "", "authors": "gcsd"}})
 
 
 async def websocket(request: web.Request) -> web.StreamResponse:
