@@ -231,8 +231,12 @@ class Channel:
 
     def _admit(self, peer: Peer) -> None:
         if len(self.peers) >= self.max_peers:
-            # a connection that never sent a good frame goes first, then the one silent the longest
-            silent = min(self.peers.values(), key=lambda p: (p.heard, p.last_rx_s))
+            # a connection that never sent a good frame goes first (the oldest of the host holding
+            # the most: a host opening connections in a loop pushes out its own), then the peer
+            # silent the longest
+            unheard = {k: p for k, p in self.peers.items() if not p.heard}
+            silent = self.peers[unauth.evictee(unheard)] if unheard else min(
+                self.peers.values(), key=lambda p: p.last_rx_s)
             self.remove_peer(silent.key)
             self.stats.peers_replaced += 1
             self.stats.unauthenticated_closed += not silent.heard

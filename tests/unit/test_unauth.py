@@ -168,3 +168,13 @@ def test_accept_out_of_descriptors_pauses_counts_and_logs_once_then_accepts_agai
     assert ch.stats.accept_failures == attempts
     assert [e["event"] for e in logs].count("accept_failed") == 1, "logged once per interval (the clock stood still)"
     assert len(accepted) == 1, "accepted once descriptors were free again (the positive control)"
+
+
+def test_where_no_signature_is_needed_a_flood_from_one_host_pushes_out_only_its_own():
+    ch, _outbox, _handled = make_channel(type="tcp-server", max_peers=3)
+    station = Conn(ch, "192.168.1.5", 40000)  # connected, has not spoken yet
+    for i in range(100):
+        Conn(ch, "10.0.0.66", 1000 + i)
+    assert not station.closed and station.key in ch.peers
+    ch.receive(station.peer, heartbeat(), 1.0)
+    assert ch.stats.unauthenticated_closed == 98
