@@ -50,6 +50,8 @@ PROGRAMS = ("gcsd", "mavproxy.py", "python", "python3", "pip", "systemctl", "jou
 # not run: files checked (kill: the unit's ExecReload, SIGHUP to the daemon; tests/integration/test_companion_live.py)
 ADMIN = ("pip", "systemctl", "journalctl", "useradd", "install", "ln", "apt-get", "kill")
 API_PORT = 14551  # the default configuration's udp-server (README "Connect a ground station")
+# the documented ports are fixed: under pytest-xdist (README's command) this file runs on one worker
+pytestmark = pytest.mark.xdist_group("documented_ports")
 START_TIMEOUT_S = 15.0
 
 
