@@ -7,9 +7,10 @@
   SETUP_SIGNING, FTP, commands) are left out of the random mix: those are authenticated
   operations (signing), not faults. Afterwards the parameters and the mission are unchanged.
 - Ten ground stations download all parameters and the mission at the same time.
-- A ground station disappears in the middle of an upload: the plan in force is intact and the
-  others are served.
 - The serial device is unplugged (PTY closed) and comes back: the channel reconnects.
+
+(A ground station vanishing mid-upload, the 8 s abort with the plan in force kept and another
+station downloading it at once, is pinned with a float clock in tests/unit/test_mission_transfer.py.)
 
 Figures (frames thrown, drops by reason, peak RSS) are printed and written to
 $GCSD_FAULT_REPORT when set, for bench/RESULTS.md.
@@ -302,26 +303,6 @@ def test_ten_ground_stations_download_parameters_and_the_mission_at_once(tmp_pat
         for c in clients:
             c.close()
         assert d.stop() == 0
-
-
-def test_ground_station_vanishing_mid_upload_leaves_the_plan_intact(tmp_path):
-    port = free_port()
-    d = Daemon(tmp_path, [{"name": "gcs", "type": "udp-server", "address": f"127.0.0.1:{port}"}])
-    a = Client(f"udpout:127.0.0.1:{port}", 255, 190)
-    b = Client(f"udpout:127.0.0.1:{port}", 254, 190)
-    try:
-        assert upload_mission(a, mission_items(5)) == M.MAV_MISSION_ACCEPTED
-        before = download_mission(a)
-        assert upload_mission(a, mission_items(20), stop_after=4) is None  # a goes silent
-        a.close()
-        time.sleep(9.0)  # the upload is abandoned after 8 s without an item
-        assert download_mission(b) == before
-        assert d.proc.poll() is None
-    finally:
-        b.close()
-        assert d.stop() == 0
-        # the plan file on disk is the old one too
-        assert (tmp_path / "state" / "mission.waypoints").read_text().count("\n") == 1 + 5  # header, home, 4
 
 
 def test_serial_device_unplugged_and_back_reconnects(tmp_path):

@@ -516,6 +516,9 @@ def test_upload_aborts_after_8_s_without_a_valid_item(kind):
     assert not mt.receiving and mt.next_deadline() is None
     assert items_of(mt) == kind.served(old)
     assert acks(mt.mission_item(GCS, 1, plan[1], False, 109.5)) == [M.MAV_MISSION_ERROR]
+    # the uploader vanished: another ground station downloads the old plan at once
+    [count] = sent(mt.mission_request_list(OTHER, 109.6), "MISSION_COUNT")
+    assert count.count == len(kind.served(old))
 
 
 def test_the_abort_deadline_is_8_s_after_the_last_valid_item(kind):
