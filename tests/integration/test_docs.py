@@ -31,6 +31,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -276,7 +277,7 @@ def _first_vehicle_heartbeat(port: int, proc: subprocess.Popen, timeout_s: float
     end = time.monotonic() + timeout_s
     try:
         while time.monotonic() < end:
-            assert proc.poll() is None, f"gcsd exited with {proc.returncode}: {proc.stdout.read() if proc.stdout else ''}"
+            assert proc.poll() is None, f"gcsd exited with {proc.returncode}"
             sock.sendto(_heartbeat_bytes(), ("127.0.0.1", port))
             if select.select([sock], [], [], 0.2)[0]:
                 for msg in parser.parse_buffer(sock.recv(65536)) or []:
@@ -304,10 +305,27 @@ def _wait_until_free(port: int, timeout_s: float = 30.0) -> None:
 
 
 class Started:
+    """`gcsd ARGS` in a scratch directory, once it logged daemon_ready: its own channels are bound
+    and its signal handlers installed, so the fixed port answers for this daemon and not for one
+    that another test run on the machine started meanwhile (that one would make ours exit 1)."""
+
     def __init__(self, args: list[str], cwd: Path) -> None:
         _wait_until_free(API_PORT)
         self.proc = subprocess.Popen(_gcsd_argv(args), cwd=cwd, env=_env(), stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, text=True, start_new_session=True)
+        self.output: list[str] = []
+        self._ready = threading.Event()
+        threading.Thread(target=self._read, daemon=True).start()
+        if not self._ready.wait(START_TIMEOUT_S):
+            self.stop()
+            pytest.fail(f"`gcsd {' '.join(args)}` not ready in {START_TIMEOUT_S} s:\n{''.join(self.output[-20:])}")
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self.output.append(line)
+            if "daemon_ready" in line:
+                self._ready.set()
+        self._ready.set()  # it exited: the caller sees proc.poll()
 
     def stop(self) -> int:
         if self.proc.poll() is None:
