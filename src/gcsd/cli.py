@@ -19,7 +19,6 @@ registered with the same configuration file, else every registered daemon of thi
 from __future__ import annotations
 
 import argparse
-import asyncio
 import contextlib
 import signal
 import sys
@@ -90,9 +89,10 @@ def _run(args: argparse.Namespace) -> int:
     setup_logging(config.log.level, config.log.format)
     log = structlog.get_logger("gcsd.cli")
     try:
+        from gcsd import loop
         from gcsd.app import run_daemon  # here, so that check-config needs nothing of the daemon
 
-        return asyncio.run(run_daemon(config))
+        return loop.run(run_daemon(config))
     except KeyboardInterrupt:  # the daemon handles SIGINT itself; this is a stop it did not see
         log.warning("daemon_interrupted")
         return EXIT_FAILURE

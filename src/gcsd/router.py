@@ -71,13 +71,20 @@ class Decision:
 
 
 IGNORE = Decision(False)
+_NONE: list[Route] = []
 
 
 class RouteTable:
-    """Learned routes keyed by (sysid, compid, channel); bounded, with stale replacement."""
+    """Learned routes keyed by (sysid, compid, channel); bounded, with stale replacement.
+
+    Indexed two more ways so that a decision costs what the frame's target costs, not what the
+    table holds (250 routes of a fleet ground side as 20): the routes of each system id, and
+    how many routes each channel has (the channels a broadcast goes to)."""
 
     def __init__(self, max_routes: int = MAX_ROUTES, stale_s: float = STALE_S) -> None:
         self._routes: dict[tuple[int, int, int], Route] = {}
+        self._by_sysid: dict[int, list[Route]] = {}
+        self._per_channel: dict[int, int] = {}  # channel -> routes through it (insertion-ordered)
         self.max_routes = max_routes
         self.stale_s = stale_s
         self.not_learned = 0  # new nodes refused because the table was full of live routes
@@ -99,25 +106,44 @@ class RouteTable:
         if len(self._routes) >= self.max_routes and not self._evict_stale(now):
             self.not_learned += 1
             return
-        self._routes[key] = Route(sysid, compid, channel, mavtype, now)
+        route = self._routes[key] = Route(sysid, compid, channel, mavtype, now)
+        self._by_sysid.setdefault(sysid, []).append(route)
+        self._per_channel[channel] = self._per_channel.get(channel, 0) + 1
+
+    def _remove(self, route: Route) -> None:
+        del self._routes[(route.sysid, route.compid, route.channel)]
+        same = self._by_sysid[route.sysid]
+        same.remove(route)
+        if not same:
+            del self._by_sysid[route.sysid]
+        left = self._per_channel[route.channel] - 1
+        if left:
+            self._per_channel[route.channel] = left
+        else:
+            del self._per_channel[route.channel]
 
     def _evict_stale(self, now: float) -> bool:
         oldest = min(self._routes.values(), key=lambda r: r.last_seen_s)
         if now - oldest.last_seen_s < self.stale_s:
             return False
-        del self._routes[(oldest.sysid, oldest.compid, oldest.channel)]
+        self._remove(oldest)
         return True
 
     def forget_channel(self, channel: int) -> None:
         """Every route through a channel that was closed at run time."""
-        for key in [k for k in self._routes if k[2] == channel]:
-            del self._routes[key]
+        for route in [r for r in self._routes.values() if r.channel == channel]:
+            self._remove(route)
 
     def has(self, sysid: int, compid: int, channel: int) -> bool:
         return (sysid, compid, channel) in self._routes
 
-    def channels_with_routes(self) -> set[int]:
-        return {r.channel for r in self._routes.values()}
+    def routes_of(self, sysid: int) -> list[Route]:
+        """The routes to one system id, in the order they were learned."""
+        return self._by_sysid.get(sysid, _NONE)
+
+    def channels_with_routes(self):
+        """The channels with at least one route, in the order their first route was learned."""
+        return self._per_channel.keys()
 
 
 class Router:
@@ -188,26 +214,27 @@ class Router:
             return Decision(True)
 
         out: list[int] = []
-        for route in self.table:
-            ch = route.channel
-            if ch == in_channel or ch in out:
-                continue
-            policy = self.policies[ch]
-            if policy.no_forward:
-                continue
-            if policy.private:
-                if (target_system, target_component) == (route.sysid, route.compid):
+        policies = self.policies
+        if broadcast_system:  # every channel with a route, but private ones (nothing is exactly theirs)
+            for ch in self.table.channels_with_routes():
+                policy = policies[ch]
+                if ch != in_channel and not policy.no_forward and not policy.private:
                     out.append(ch)
-                continue
-            if broadcast_system or (
-                target_system == route.sysid
-                and (
-                    broadcast_component
-                    or target_component == route.compid
-                    or target_system not in self.local_sysids
-                )
-            ):
-                out.append(ch)
+        else:  # only the routes to the target system can match (the index: one lookup)
+            remote = target_system not in self.local_sysids
+            for route in self.table.routes_of(target_system):
+                ch = route.channel
+                if ch == in_channel or ch in out:
+                    continue
+                policy = policies[ch]
+                if policy.no_forward:
+                    continue
+                if policy.private:
+                    if target_component == route.compid:
+                        out.append(ch)
+                    continue
+                if broadcast_component or remote or target_component == route.compid:
+                    out.append(ch)
         process = addressed_to_us or (not out and match_system) or broadcast_system
         return Decision(process, self._grouped(out, in_channel) if self.members else tuple(out))
 

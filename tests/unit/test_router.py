@@ -250,3 +250,38 @@ def test_a_broadcast_from_a_gcs_goes_to_every_link_of_the_group_once():
     router = grouped_router(fc_seen_on=(2,))
     got = decide(router, 0, GCS1, CMD, 0, 0)
     assert got.process_locally and sorted(got.out_channels) == [1, 2, 3]
+
+
+def _linear_out(router: Router, in_channel: int, ts: int, tc: int) -> set[int]:
+    """The forwarding rule as a walk over every route (the table before it was indexed)."""
+    out = set()
+    for route in router.table:
+        ch, policy = route.channel, router.policies[route.channel]
+        if ch == in_channel or policy.no_forward:
+            continue
+        if policy.private:
+            if (ts, tc) == (route.sysid, route.compid):
+                out.add(ch)
+            continue
+        if ts <= 0 or (ts == route.sysid and (tc <= 0 or tc == route.compid or ts not in router.local_sysids)):
+            out.add(ch)
+    return out
+
+
+def test_the_indexed_table_forwards_as_a_walk_over_every_route_would():
+    import random
+
+    rng = random.Random(7)
+    policies = [ChannelPolicy(), ChannelPolicy(), ChannelPolicy(private=True), ChannelPolicy(no_forward=True),
+                ChannelPolicy()]
+    router = Router({(1, 1)}, policies, RouteTable(300))
+    for _ in range(400):  # sources come and go; some are relearned on other channels
+        router.table.learn(rng.randint(2, 60), rng.choice((0, 1, 100, 190)), rng.randrange(5), 0.0)
+    assert len(router.table) == sum(len(router.table.routes_of(s)) for s in range(256))
+    for _ in range(3000):
+        in_channel = rng.randrange(5)
+        ts, tc = rng.choice((-1, 0, 1, rng.randint(2, 70))), rng.choice((-1, 0, 1, 100, 190))
+        if in_channel in (2, 3) or (ts > 0 and tc > 0 and (ts, tc) in router.local):
+            continue
+        decision = router.decide(in_channel, CMD, 250, 190, ts, tc, 1.0)
+        assert set(decision.out_channels) == _linear_out(router, in_channel, ts, tc), (in_channel, ts, tc)
