@@ -34,10 +34,9 @@ Output: every admitted peer gets every frame. Forwarded frames go out byte-exact
 messages are encoded once per version in use on the channel (usually once, MAVLink2 signed
 when signing is active), each version with its own sequence numbers.
 
-The byte budget (`bandwidth`, bytes/s) is a token bucket holding at most 100 ms of traffic (and
-at least one maximal frame). Scheduled telemetry waits for it; a frame that finds no budget is
-dropped and counted, never queued without bound. A transport that reports its buffer full also
-counts as a drop.
+The output side (outbox.py) is the only writer: budget, encoders, signing stamp, tlog and a
+bounded queue of replies sent as the budget refills. The channel reads no clock: the asyncio
+layer hands it `now` (receive) and `tick(now, wall)` once per wake-up.
 """
 
 from __future__ import annotations
@@ -54,6 +53,7 @@ from .config import ChannelConfig
 from .filters import counters as gate_counters
 from .filters import gates
 from .msgids import RADIO_IDS
+from .outbox import Outbox
 from .router import ChannelPolicy
 from .streamreq import StreamRequests
 
@@ -112,31 +112,6 @@ class Peer:
         self.close = close
 
 
-class TokenBucket:
-    def __init__(self, rate_bps: float, now: float) -> None:
-        self.rate_bps = float(rate_bps)
-        self.capacity = max(self.rate_bps / 10.0, float(MAX_FRAME_BYTES))
-        self.tokens = self.capacity
-        self._last_s = now
-
-    def _refill(self, now: float) -> None:
-        if now > self._last_s:
-            self.tokens = min(self.capacity, self.tokens + (now - self._last_s) * self.rate_bps)
-            self._last_s = now
-
-    def try_take(self, nbytes: int, now: float) -> bool:
-        self._refill(now)
-        if self.tokens < nbytes:
-            return False
-        self.tokens -= nbytes
-        return True
-
-    def wait_s(self, nbytes: int, now: float) -> float:
-        """How long until nbytes may be sent."""
-        self._refill(now)
-        return max(0.0, (nbytes - self.tokens) / self.rate_bps)
-
-
 def _source_of(raw: bytes) -> int:
     return raw[5] if raw[0] == STX_V2 else raw[3]
 
@@ -158,8 +133,8 @@ class Channel:
         self._waiting: dict[object, Peer] = {}  # stream connections not served yet
         self.max_peers = getattr(config, "max_peers", None) or DEFAULT_MAX_PEERS
         self._start_v1 = config.mavlink == 1
-        self._v1_peers = 0
-        self.budget = TokenBucket(config.bandwidth, clock()) if config.bandwidth else None
+        # the output side: budget, encoders, signing stamp, tlog, the reply queue (outbox.py)
+        self.out = Outbox(index, config.bandwidth, self.stats, self.peers, "high_latency" not in config.options)
         self.local_address: tuple[str, int] | None = None
         self.verify: Callable[[Frame], str | None] = _accept_all  # None: accepted, else the reject reason
         self.on_frame: Callable[[Channel, Frame, float], None] = lambda channel, frame, now: None
@@ -168,26 +143,22 @@ class Channel:
         self.on_peer_joined: Callable[[Channel, Peer], None] = lambda channel, peer: None
         self.make_writer: Callable[[object], PeerWriter] | None = None  # the transport's, for admitted strangers
         self.serve_on_connect = True  # tcp-server: serve a connection before its first good frame
-        self._encoders: dict[tuple[int, int, bool], Encoder] = {}
         self._keep_bad_crc = "forward_bad_crc" in config.options
         self._strangers = FrameParser(ParseStats(), keep_bad_crc=False)  # datagrams from unknown addresses
         # a signing gateway's own unsigned frames are accepted: they are what it signs (signgate.py)
         self.sign_forwarded = "sign_forwarded" in config.options
         self.unsigned_ok = "unsigned_ok" in config.options or self.sign_forwarded
-        self.signing = None  # the process's Signing, set by the GCS; outgoing frames are signed when it has a key
-        self.wall: Callable[[], float] = time.time
+        self.wall: Callable[[], float] = time.time  # the asyncio layer's wall clock (it ticks the channel)
         self.signature_reject_reasons: dict[str, int] = {}
-        self.tlog = None  # a TlogWriter shared by all channels, when log.tlog is set
         self.errors = ErrorCounts()  # the daemon's, set by the composition root
         self._retired = ParseStats()  # counters of peers that are gone
         self._rejected_frames = 0
         self._rejected_bytes = 0
         self._last_sweep_s = 0.0
-        # a high-latency link is silent until CONTROL_HIGH_LATENCY enables it (REFERENCE.md 11)
-        self.output_enabled = "high_latency" not in config.options
         # companion routing (filters.py): None when the channel has no filter / no rate cap
         self.in_gate, self.out_gate = gates(config)
         self.dedup = config.group is not None  # same frames dropped (a group; all channels with routing.dedup_ms)
+        self.out.gate = self.out_gate
         self.retired = False  # removed at run time: its slot waits for the next added channel (livechannels.py)
         self.stream_requests = StreamRequests(config.request_streams) if config.request_streams else None
 
@@ -195,20 +166,20 @@ class Channel:
     @property
     def mavlink1(self) -> bool:
         """True when no peer takes MAVLink2 (then only MAVLink1 goes out)."""
-        return self._v1_peers == len(self.peers) if self.peers else self._start_v1
+        return self.out.v1_peers == len(self.peers) if self.peers else self._start_v1
 
     def _new_parser(self) -> FrameParser:
         return FrameParser(ParseStats(), keep_bad_crc=self._keep_bad_crc)
 
     def add_peer(self, key: object, write: PeerWriter, now: float | None = None) -> Peer:
         """A peer served from the start (the remote of a client channel, a serial port)."""
-        peer = Peer(key, write, self.clock() if now is None else now, self._new_parser(), self._start_v1)
+        peer = Peer(key, write, self.out.time.now if now is None else now, self._new_parser(), self._start_v1)
         self._admit(peer)
         return peer
 
     def connect_peer(self, key: object, write: PeerWriter, close: Callable[[], None] | None = None) -> Peer:
         """A tcp-server connection: served now, or after its first good frame (`serve_on_connect`)."""
-        peer = Peer(key, write, self.clock(), self._new_parser(), self._start_v1, close)
+        peer = Peer(key, write, self.out.time.now, self._new_parser(), self._start_v1, close)
         if self.serve_on_connect:
             self._admit(peer)
             return peer
@@ -249,19 +220,19 @@ class Channel:
         self._waiting.pop(peer.key, None)
         peer.admitted = True
         self.peers[peer.key] = peer
-        self._v1_peers += peer.mavlink1
+        self.out.v1_peers += peer.mavlink1
         self.on_peer_joined(self, peer)
 
     def _set_version(self, peer: Peer, mavlink1: bool) -> None:
         peer.heard = True
         if peer.admitted:
-            self._v1_peers += mavlink1 - peer.mavlink1
+            self.out.v1_peers += mavlink1 - peer.mavlink1
         peer.mavlink1 = mavlink1
 
     def remove_peer(self, key: object) -> None:
         peer = self.peers.pop(key, None)
         if peer is not None:
-            self._v1_peers -= peer.mavlink1
+            self.out.v1_peers -= peer.mavlink1
         else:
             peer = self._waiting.pop(key, None)
         if peer is not None:
@@ -300,6 +271,7 @@ class Channel:
                 source_sysid: int | None = None) -> None:
         """With `source_sysid` (an mqtt ground side: the S of T/up/S/C), every frame the parser
         finds must come from that system, or the whole payload is dropped (`spoofed_dropped`)."""
+        self.out.time.now = now
         parser = peer.parser
         frames = parser.feed(data)
         if datagram and parser.pending_bytes():
@@ -315,7 +287,7 @@ class Channel:
         for frame in frames:
             try:  # the receive boundary: one frame's failure is counted, the rest of the batch goes on
                 if tlog is not None:
-                    tlog.record(frame.raw, self.wall())
+                    tlog.record(frame.raw, self.out.time.wall)
                 reason = verify(frame)
                 if reason is not None:
                     self._rejected_frames += 1
@@ -346,81 +318,56 @@ class Channel:
         self._rejected_bytes += sum(len(f.raw) for f in frames)
         return True
 
-    # --- send ------------------------------------------------------------------------------
+    # --- send (outbox.py) -------------------------------------------------------------------
+    def tick(self, now: float, wall: float) -> None:
+        """The asyncio layer's time at this wake-up, for everything done until the next one."""
+        time = self.out.time
+        time.now = now
+        time.wall = wall
+
+    @property
+    def tlog(self):
+        return self.out.tlog
+
+    @tlog.setter
+    def tlog(self, tlog) -> None:
+        self.out.tlog = tlog  # a TlogWriter shared by all channels, when log.tlog is set
+
+    @property
+    def signing(self):
+        return self.out.signing
+
+    @signing.setter
+    def signing(self, signing) -> None:
+        self.out.signing = signing  # the process's Signing: frames are signed when it has a key
+
+    @property
+    def output_enabled(self) -> bool:
+        """False on a high-latency link until CONTROL_HIGH_LATENCY enables it (REFERENCE.md 11)."""
+        return self.out.output_enabled
+
+    @output_enabled.setter
+    def output_enabled(self, on: bool) -> None:
+        self.out.output_enabled = on
+
+    @property
+    def budget(self):
+        return self.out.budget
+
     def encoder(self, sysid: int, compid: int, mavlink1: bool = False) -> Encoder:
-        enc = self._encoders.get((sysid, compid, mavlink1))
-        if enc is None:
-            enc = self._encoders[(sysid, compid, mavlink1)] = Encoder(sysid, compid)
-        return enc
+        return self.out.encoder(sysid, compid, mavlink1)
 
     def has_room(self, nbytes: int = MAX_FRAME_BYTES) -> bool:
-        budget = self.budget
-        if budget is None:
-            return True
-        budget._refill(self.clock())
-        return budget.tokens >= nbytes
+        return self.out.has_room(nbytes)
 
     def budget_wait_s(self, nbytes: int = MAX_FRAME_BYTES) -> float:
-        return 0.0 if self.budget is None else self.budget.wait_s(nbytes, self.clock())
+        return self.out.budget_wait_s(nbytes)
 
     def write(self, raw: bytes) -> bool:
-        """Send raw bytes to every peer, if the budget allows; False (and a counted drop) if not.
-        filter.out or a rate cap may hold it back (counted by the gate; not a failure of the link)."""
-        gate = self.out_gate
-        if gate is not None and self.peers and not gate.allow(raw, self.clock):
-            return True
-        return self._write(raw, None)
-
-    def _write(self, raw: bytes, mavlink1: bool | None) -> bool:
-        """Write to every peer, or to the peers of one version; budget, tlog and counters."""
-        if not self.peers:
-            return True  # nobody to send to is not a failure of the link
-        if not self.output_enabled:
-            self.stats.muted += 1
-            return True  # discarded, as a disabled high-latency link discards everything
-        if self.budget is not None and not self.budget.try_take(len(raw), self.clock()):
-            self.stats.drops += 1
-            return False
-        if self.tlog is not None:
-            self.tlog.record(raw, self.wall())
-        sent = False
-        for peer in list(self.peers.values()):
-            if mavlink1 is not None and peer.mavlink1 != mavlink1:
-                continue
-            if peer.write(raw):
-                sent = True
-            else:
-                self.stats.drops += 1
-        if sent:
-            self.stats.packets_out += 1
-            self.stats.bytes_out += len(raw)
-        return sent
+        return self.out.write(raw)
 
     def send_message(self, msg: MAVLink_message, sysid: int, compid: int) -> bool:
-        """Encode a message from one of our components for this link's peers and write it."""
-        peers = len(self.peers)
-        if not peers:
-            return True
-        gate = self.out_gate  # once per message, whatever number of versions it is encoded in
-        if gate is not None and not gate.allow_key(msg.get_msgId() << 16 | sysid << 8 | compid, self.clock):
-            return True
-        v1 = self._v1_peers
-        if v1 == 0:
-            return self._send_as(msg, sysid, compid, False, None)
-        if v1 == peers:
-            return self._send_as(msg, sysid, compid, True, None)
-        sent_v2 = self._send_as(msg, sysid, compid, False, False)
-        return self._send_as(msg, sysid, compid, True, True) and sent_v2
-
-    def _send_as(self, msg: MAVLink_message, sysid: int, compid: int, mavlink1: bool, only: bool | None) -> bool:
-        signing = self.signing
-        sign = None
-        if signing is not None and signing.key is not None and not mavlink1:
-            sign = (signing.key, self.index & 0xFF, signing.next_timestamp(self.wall()))
-        raw = self.encoder(sysid, compid, mavlink1).encode(msg, mavlink1, sign)
-        if raw is None:
-            return True  # not representable in MAVLink1: nothing to send
-        return self._write(raw, only)
+        return self.out.send_message(msg, sysid, compid)
 
     # --- counters --------------------------------------------------------------------------
     def snapshot(self) -> dict[str, int]:
@@ -434,6 +381,7 @@ class Channel:
         out["packets_in"] -= self._rejected_frames
         out["bytes_in"] -= self._rejected_bytes
         out["peers"] = len(self.peers)
+        out["replies_dropped"] = self.out.replies_dropped
         out.update(gate_counters(self.in_gate, self.out_gate))
         for reason, n in self.signature_reject_reasons.items():
             out[f"signature_rejects_{reason}"] = n

@@ -36,6 +36,7 @@ from .config_mqtt import route_capacity
 from .http import wiring as http_wiring
 from .logs.wiring import flight_log_service, log_dir
 from .node import VehicleNode
+from .outbox import WakeTime
 from .params import ParamStore, sysids
 from .params.parmfile import read_parm
 from .persist import WriteBehind
@@ -282,6 +283,7 @@ def build(gcs, channels, backend=None, producers: dict | None = None) -> None:
     )
     gcs.signing = gcs.signing_manager.signing
     gcs.tlog = TlogWriter(config.log.tlog) if config.log.tlog else None
+    gcs.wake_time = WakeTime()  # the asyncio layer's time at each wake-up, shared by every channel
     # the HTTP API's own channel comes after the configured ones (gcsd.http.wiring)
     gcs.channels = [channel(gcs, i, c) for i, c in enumerate([*channels, *http_wiring.channel_configs(config)])]
     count = config.vehicle.count
@@ -312,6 +314,7 @@ def channel(gcs, index: int, config: ChannelConfig) -> Channel:
     """A channel connected to the daemon's receive path, signing, tlog and error boundary (at
     start, and for a channel added at run time: livechannels.py)."""
     ch = http_wiring.channel_class(config)(index, config, gcs.clock.now)
+    ch.out.time = gcs.wake_time
     ch.signing = gcs.signing
     ch.wall = gcs.clock.wall
     ch.tlog = gcs.tlog

@@ -44,8 +44,8 @@ from .config_companion import (
     read_companion,
     read_routing,
 )
-from .config_logs import read_flight_logs
 from .config_http import read_http
+from .config_logs import read_flight_logs
 from .config_mqtt import MQTT_KEYS, read_mqtt
 from .config_reader import Field, Reader, Section, describe, is_null, line_of
 from .config_schema import (  # noqa: F401  the schema, re-exported: `from gcsd.config import Config` works

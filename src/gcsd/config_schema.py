@@ -16,8 +16,8 @@ from types import MappingProxyType
 
 from .config_can import CanConfig
 from .config_companion import ChannelFilter, RoutingConfig
-from .config_logs import FlightLogsConfig
 from .config_http import HttpConfig
+from .config_logs import FlightLogsConfig
 from .config_mqtt import MqttConfig
 from .streams import STREAM_NAMES
 

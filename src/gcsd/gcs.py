@@ -167,7 +167,7 @@ class GCS:
             self.loops.remember(raw, now)  # the bytes that go out: what a loop brings back
             channels = self.channels
             for index in decision.out_channels:
-                channels[index].write(raw)
+                channels[index].out.write(raw)
         if channel.stream_requests is not None and (msgid == MSG_ID_HEARTBEAT or msgid == MSG_ID_SYSTEM_TIME):
             self._request_streams(channel, frame, now)
         if decision.process_locally and frame.known:
@@ -318,6 +318,7 @@ class GCS:
             tasks.append(tg.create_task(self._save_signing_timestamp(), name="signing"))
             await stop.wait()
             now = self.clock.now()
+            self.wake_time.now, self.wake_time.wall = now, self.clock.wall()
             for node in self.nodes:
                 node.shutdown(now)  # final answers go out while the links are still open
             await asyncio.sleep(0.05)  # let stream transports write them

@@ -316,6 +316,7 @@ class MqttLink:
                 channel.stats.spoofed_dropped += 1
                 return
         now = channel.clock()
+        channel.tick(now, channel.wall())
         # paho would swallow an exception silently (suppress_exceptions): the daemon's boundary counts it
         with channel.errors.guard("mqtt_receive", now, channel=channel.name, topic=message.topic):
             channel.receive(peer, payload, now, datagram=True, source_sysid=source)

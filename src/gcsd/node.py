@@ -122,8 +122,12 @@ class VehicleNode:
         return self.links[channel.index]
 
     def reply(self, channel: Channel, msg) -> bool:
-        """Send one message on one channel now (acks, replies)."""
-        return channel.send_message(msg, self.sysid, self.compid)
+        """Answer on one channel: now, or queued until its byte budget has room (outbox.py)."""
+        out = channel.out
+        sent = out.reply(msg, self.sysid, self.compid)
+        if out.replies:
+            self._wake(channel)  # the next pass sends it when the budget has refilled
+        return sent
 
     def text_channels(self) -> set[int]:
         """Where STATUSTEXT goes: served links that are not private."""
@@ -248,6 +252,9 @@ class VehicleNode:
             channel.send_message(msg, sysid, compid)
             return True
 
+        out = channel.out
+        if out.replies and not out.flush_replies():  # replies first, then the schedule
+            return now + max(out.budget_wait_s(), 0.001)
         finished = link.scheduler.run(now, send) and self._drain_text(channel, now, send_text)
         if not finished:
             return now + max(channel.budget_wait_s(), 0.001)

@@ -95,6 +95,7 @@ class _Datagram:
         recvfrom = self.sock.recvfrom
         peers = channel.peers
         now = channel.clock()
+        channel.tick(now, channel.wall())  # the time of this wake-up, for everything it does
         for _ in range(self.DRAIN_BATCH):
             try:
                 data, addr = recvfrom(65536)
@@ -178,7 +179,9 @@ class _Stream(asyncio.Protocol):
 
     def data_received(self, data: bytes) -> None:
         channel = self.channel
-        channel.receive(self.peer, data, channel.clock())
+        now = channel.clock()
+        channel.tick(now, channel.wall())
+        channel.receive(self.peer, data, now)
 
     def connection_lost(self, exc) -> None:
         self.channel.remove_peer(self.key)
@@ -314,6 +317,7 @@ async def run_channel(
         try:
             while not closed.done():
                 now = clock()
+                channel.tick(now, channel.wall())  # the send pass's time
                 if hunt is not None and _probe_over(channel, hunt, now):
                     next_baud = True
                     break

@@ -367,3 +367,29 @@ def test_a_real32_value_survives_a_restart_bit_exact(daemon, client, tmp_path):
     c2 = client(udp_url(d2.port("gcs")))
     back = read_param(c2, "COMPASS_OFS_X").param_value
     assert struct.pack("<f", back) == struct.pack("<f", value), (back, value)
+
+
+def test_on_a_57600_baud_budget_every_param_value_of_a_list_and_every_read_reply_arrives(daemon, client):
+    """The radio's budget is spent by the list: the answers to reads asked meanwhile wait in the
+    channel's reply queue (outbox.py) instead of being dropped, and the list itself arrives
+    whole from the one PARAM_REQUEST_LIST, with no read asked again."""
+    d = daemon({"channels": [udp_channel("radio", bandwidth=5760)]})
+    c = client(udp_url(d.port("radio")))
+    c.heartbeat()
+    mark = c.mark()
+    c.send(M.MAVLink_param_request_list_message(*VEHICLE))
+    wanted = list(range(0, 400, 20))
+    for i in wanted:
+        c.send(M.MAVLink_param_request_read_message(*VEHICLE, b"", i))
+    got: dict[int, int] = {}
+    count = None
+    deadline = time.monotonic() + 40.0
+    while time.monotonic() < deadline and (count is None or len(got) < count):
+        pump([c], 0.1)
+        for r in c.since(mark, "PARAM_VALUE"):
+            count = r.msg.param_count
+            got[r.msg.param_index] = got.get(r.msg.param_index, 0) + 1
+        mark = c.mark()
+    assert count is not None and sorted(got) == list(range(count)), "every index, from one request"
+    assert all(got[i] >= 2 for i in wanted), "each read was answered besides the list's own copy"
+    assert d.stats("radio")["replies_dropped"] == 0

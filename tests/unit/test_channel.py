@@ -13,8 +13,9 @@ import yaml
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.channel import MAX_FRAME_BYTES, UDP_PEER_TIMEOUT_S, Channel, TokenBucket
+from gcsd.channel import MAX_FRAME_BYTES, UDP_PEER_TIMEOUT_S, Channel
 from gcsd.config import parse_config
+from gcsd.outbox import TokenBucket
 
 T0 = 1000.0
 handed_on: dict[Channel, list] = {}
@@ -149,6 +150,7 @@ def test_budget_refills_with_the_clock():
     assert not ch.has_room(len(HEARTBEAT))
     assert ch.budget_wait_s(len(HEARTBEAT)) > 0
     clock.t += ch.budget_wait_s(len(HEARTBEAT))
+    ch.tick(clock.t, 0.0)  # the asyncio layer's next wake-up
     assert ch.has_room(len(HEARTBEAT))
     assert ch.write(HEARTBEAT)
 
@@ -161,6 +163,7 @@ def test_sustained_output_keeps_to_the_budget():
     offered = 0
     for _ in range(10_000):  # 10 s, twice the budget offered in 1 ms steps
         clock.t += 0.001
+        ch.tick(clock.t, 0.0)
         for _ in range(2 if offered % 5 else 1):
             ch.write(HEARTBEAT)
             offered += 1
@@ -344,3 +347,57 @@ def test_each_peer_gets_its_own_version_and_a_mavlink2_peer_never_goes_back():
     datagram(ch, old, HEARTBEAT, T0 + 0.2)  # the MAVLink1 station upgrades
     assert ch.send_message(msg, 1, 1)
     assert [d[0] for d in sent[old]] == [0xFE, 0xFD]
+
+
+# --- replies under the budget (outbox.py) ------------------------------------------------------
+
+def _param_value(i: int):
+    return M.MAVLink_param_value_message(f"P{i:04d}".encode(), float(i), M.MAV_PARAM_TYPE_REAL32, 1000, i)
+
+
+def test_a_reply_finds_the_budget_spent_is_queued_not_dropped_and_goes_out_when_it_refills():
+    clock = Clock()
+    ch, sent = make_channel(clock, bandwidth=1000)  # 100 ms of budget: 100 bytes, i.e. one maximal frame
+    addr = ("10.0.0.1", 5)
+    ch.add_peer(addr, lambda data: sent.setdefault(addr, []).append(data) or True)
+    ch.tick(clock.t, 0.0)
+    while ch.write(HEARTBEAT):  # forwarded frames spend the budget (and the last one is a counted drop)
+        pass
+    drops = ch.stats.drops
+    out = ch.out
+    assert out.reply(_param_value(1), 1, 1) and out.reply(_param_value(2), 1, 1)
+    assert len(out.replies) == 2 and ch.stats.drops == drops, "queued, not dropped"
+    written = len(sent[addr])
+    assert not out.flush_replies() and len(sent[addr]) == written, "still no room"
+    clock.t += out.budget_wait_s(MAX_FRAME_BYTES)
+    ch.tick(clock.t, 0.0)
+    assert not out.flush_replies()  # room for one maximal frame: the first reply only
+    clock.t += out.budget_wait_s(MAX_FRAME_BYTES)
+    ch.tick(clock.t, 0.0)
+    assert out.flush_replies() and not out.replies
+    got = [m for m in (M.MAVLink(None).parse_buffer(b"".join(sent[addr][written:])) or [])]
+    assert [m.param_index for m in got] == [1, 2], "in order, each once"
+    assert ch.snapshot()["replies_dropped"] == 0
+
+
+def test_the_reply_queue_is_bounded_and_counts_what_it_drops():
+    from gcsd.outbox import REPLY_QUEUE_MAX
+
+    clock = Clock()
+    ch, sent = make_channel(clock, bandwidth=1000)
+    ch.add_peer(("10.0.0.1", 5), lambda data: True)
+    ch.tick(clock.t, 0.0)
+    while ch.write(HEARTBEAT):
+        pass
+    for i in range(REPLY_QUEUE_MAX + 3):
+        ch.out.reply(_param_value(i), 1, 1)
+    assert len(ch.out.replies) == REPLY_QUEUE_MAX and ch.snapshot()["replies_dropped"] == 3
+    assert ch.out.replies[0][0].param_index == 3, "the oldest went first"
+
+
+def test_without_a_budget_a_reply_goes_out_at_once():
+    clock = Clock()
+    ch, sent = make_channel(clock)
+    addr = ("10.0.0.1", 5)
+    ch.add_peer(addr, lambda data: sent.setdefault(addr, []).append(data) or True)
+    assert ch.out.reply(_param_value(7), 1, 1) and not ch.out.replies and len(sent[addr]) == 1

@@ -49,6 +49,8 @@ class LocalChannel(Channel):
         self._out_seq: dict[tuple[int, int], int] = {}
         self._injectors: dict[tuple[int, int], Encoder] = {}
         self.add_peer(PEER_KEY, lambda raw: True)
+        # the outbox (outbox.py) writes what the daemon sends and replies here through these
+        self.out.write, self.out.send_message, self.out.has_room = self.write, self.send_message, self.has_room
         self.opener: Callable[[], Awaitable[tuple]] | None = None  # the API's listener (HttpService.open)
 
     async def open(self) -> tuple[Callable[[], None], asyncio.Future]:
