@@ -282,6 +282,9 @@ def build(gcs, channels, backend=None, producers: dict | None = None) -> None:
         clock.wall(),
     )
     gcs.signing = gcs.signing_manager.signing
+    # the signing timestamp, saved every SAVE_INTERVAL_S off the loop (mode 0600, atomic)
+    gcs.signing_writer = WriteBehind(gcs.signing_manager.store.path, gcs.signing_manager, clock.now,
+                                     write=SigningStore.write, errors=errors)
     gcs.tlog = TlogWriter(config.log.tlog) if config.log.tlog else None
     gcs.wake_time = WakeTime()  # the asyncio layer's time at each wake-up, shared by every channel
     # the HTTP API's own channel comes after the configured ones (gcsd.http.wiring)

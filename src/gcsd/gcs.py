@@ -295,7 +295,7 @@ class GCS:
             with self.errors.guard("sync", now, sysid=node.sysid):
                 node.sync()
         with self.errors.guard("sync", now):
-            self.signing_manager.save_if_changed()  # not "clean": the daemon goes on signing
+            self.signing_writer.sync()  # not "clean": the daemon goes on signing
         log.info("state_synced", vehicles=len(self.nodes))
 
     def _flush(self) -> None:
@@ -304,6 +304,7 @@ class GCS:
                 node.close()
             except Exception:
                 log.exception("flush_failed", sysid=node.sysid)
+        self.signing_writer.flush()
         if self.signing.key is not None:
             try:
                 self.signing_manager.save(clean=True)
@@ -339,10 +340,9 @@ class GCS:
         while True:
             await asyncio.sleep(SAVE_INTERVAL_S)
             with self.errors.guard("signing_save", self.clock.now()):
-                try:
-                    self.signing_manager.save_if_changed()
-                except OSError as exc:
-                    log.error("signing_save_failed", error=str(exc))
+                self.signing_writer.kick()  # written on the write-behind's worker thread
+                if self.signing_manager.save_error:
+                    log.error("signing_save_failed", error=self.signing_manager.save_error)
 
     async def _log_stats(self) -> None:
         last = {ch: ch.snapshot() for ch in self.channels}

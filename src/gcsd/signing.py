@@ -189,8 +189,15 @@ class SigningStore:
         return SavedSigning(key, int(fields.get("timestamp", "0")), fields.get("clean", "0").strip() == "1")
 
     def save(self, key: bytes | None, timestamp: int, clean: bool) -> None:
-        text = f"key {key.hex() if key else 'none'}\ntimestamp {timestamp}\nclean {int(clean)}\n"
-        write_atomic(self.path, text, mode=0o600)
+        self.write(self.path, self.text(key, timestamp, clean))
+
+    @staticmethod
+    def text(key: bytes | None, timestamp: int, clean: bool) -> str:
+        return f"key {key.hex() if key else 'none'}\ntimestamp {timestamp}\nclean {int(clean)}\n"
+
+    @staticmethod
+    def write(path: Path, text: str) -> None:
+        write_atomic(path, text, mode=0o600)
 
     @staticmethod
     def restart_floor(saved: SavedSigning) -> int:
@@ -225,6 +232,7 @@ class SigningManager:
         key = config_key if config_key is not None else (saved.key if saved else None)
         self.signing = Signing(None if key == bytes(32) else key, max(wall_to_units(wall_s), floor), require, floor)
         self._saved_timestamp = -1
+        self.save_error: str | None = None  # the last periodic save's failure, until one succeeds
         self._last_warning_s: dict[int, float] = {}
 
     def apply_key(self, key: bytes, initial_timestamp: int, wall_s: float) -> None:
@@ -238,8 +246,28 @@ class SigningManager:
         self._saved_timestamp = self.signing.timestamp
 
     def save_if_changed(self) -> None:
-        if self.signing.key is not None and self.signing.timestamp != self._saved_timestamp:
+        if self._changed():
             self.save(clean=False)
+
+    def _changed(self) -> bool:
+        return self.store is not None and self.signing.key is not None and self.signing.timestamp != self._saved_timestamp
+
+    # --- the periodic timestamp save through persist.WriteBehind: snapshot here, write off the loop
+    def persist_deadline(self) -> float | None:
+        return 0.0 if self._changed() else None
+
+    def take_persist(self, now: float, force: bool = False) -> str | None:
+        if not self._changed():
+            return None
+        self._saved_timestamp = self.signing.timestamp
+        return self.store.text(self.signing.key, self.signing.timestamp, False)
+
+    def persist_done(self) -> None:
+        self.save_error = None
+
+    def persist_failed(self, error: str) -> None:
+        self.save_error = error
+        self._saved_timestamp = -1  # written again at the next interval
 
     def should_warn(self, channel_index: int, now: float) -> bool:
         """At most one warning per WARN_INTERVAL_S per channel."""

@@ -1,14 +1,22 @@
 """Telemetry logs in MAVProxy's .tlog format: each frame, in or out, preceded by its arrival
 time as a big-endian 64-bit count of microseconds since the Unix epoch (what mavlogdump.py and
-MAVExplorer read). Frames are buffered and written when the buffer passes BUFFER_BYTES or on
-`flush()` (the daemon flushes every second and at stop). When the file passes `max_bytes` it is
-rotated: NAME -> NAME.1 -> NAME.2 ..., keeping `keep` old files."""
+MAVExplorer read). Frames are buffered on the event loop and handed, when the buffer passes
+BUFFER_BYTES or on `flush()` (the daemon flushes every second), to this file's own worker thread,
+which writes them in order: the loop never waits for the disk. `close()` (at stop) waits for the
+worker and writes the rest. When the file passes `max_bytes` it is rotated (by the worker):
+NAME -> NAME.1 -> NAME.2 ..., keeping `keep` old files. A failed write is logged
+(`tlog_write_failed`) and the frames of that chunk are lost; the daemon goes on."""
 
 from __future__ import annotations
 
+import concurrent.futures
 import os
 import struct
 from pathlib import Path
+
+import structlog
+
+log = structlog.get_logger("gcsd.tlog")
 
 BUFFER_BYTES = 64 * 1024
 DEFAULT_MAX_BYTES = 64 * 1024 * 1024
@@ -26,6 +34,7 @@ class TlogWriter:
         self._file = open(self.path, "ab")
         self._size = self._file.tell()
         self.frames = 0
+        self._worker = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="gcsd-tlog")
 
     def record(self, raw: bytes, wall_s: float) -> None:
         self._buf += _STAMP.pack(int(wall_s * 1e6))
@@ -35,14 +44,22 @@ class TlogWriter:
             self.flush()
 
     def flush(self) -> None:
+        """Hand what is buffered to the worker thread (returns at once)."""
         if not self._buf or self._file is None:
             return
-        self._file.write(self._buf)
-        self._file.flush()
-        self._size += len(self._buf)
-        self._buf.clear()
-        if self._size >= self.max_bytes:
-            self._rotate()
+        chunk, self._buf = bytes(self._buf), bytearray()
+        self._worker.submit(self._write, chunk)
+
+    def _write(self, chunk: bytes) -> None:
+        """On the worker thread: one chunk, in order; rotation when the file is full."""
+        try:
+            self._file.write(chunk)
+            self._file.flush()
+            self._size += len(chunk)
+            if self._size >= self.max_bytes:
+                self._rotate()
+        except (OSError, ValueError) as exc:  # ValueError: the file was closed under a failed rotation
+            log.error("tlog_write_failed", path=str(self.path), error=str(exc), bytes=len(chunk))
 
     def _rotate(self) -> None:
         self._file.close()
@@ -55,7 +72,9 @@ class TlogWriter:
         self._size = 0
 
     def close(self) -> None:
+        """Everything recorded is written when this returns."""
         self.flush()
+        self._worker.shutdown(wait=True)
         if self._file is not None:
             self._file.close()
             self._file = None

@@ -154,7 +154,7 @@ def test_a_raise_in_the_signing_timestamp_task_is_counted_and_the_daemon_keeps_s
         raise RuntimeError("deliberately broken timestamp save")
 
     monkeypatch.setattr(gcs, "SAVE_INTERVAL_S", 0.1)
-    monkeypatch.setattr(SigningManager, "save_if_changed", broken)
+    monkeypatch.setattr(SigningManager, "persist_deadline", broken)
     d = daemon({"channels": [udp_channel("gcs")]})
     station = client(udp_url(d.port("gcs")))
     station.heartbeat()

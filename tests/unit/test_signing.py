@@ -272,3 +272,23 @@ def test_a_frame_at_or_below_the_saved_timestamp_is_refused_after_a_restart_what
     m.signing.set_key(KEY, NOW - 30 * UNITS_PER_S, WALL)  # the same key, a lower timestamp
     assert check(m.signing, signed_frame(timestamp=NOW)) == REPLAY
     assert check(m.signing, signed_frame(timestamp=NOW + 1, link_id=2)) is None
+
+
+def test_the_periodic_timestamp_save_is_a_write_behind_source(tmp_path):
+    """The snapshot is taken on the loop (take_persist) and written elsewhere; nothing is due
+    until the timestamp moves; a failed write makes it due again."""
+    store = SigningStore(tmp_path / "signing.key")
+    manager = SigningManager(KEY, False, store, 1.8e9)
+    manager.save(clean=False)
+    assert manager.persist_deadline() is None and manager.take_persist(0.0, force=True) is None
+    manager.signing.next_timestamp(1.8e9 + 5)
+    assert manager.persist_deadline() == 0.0
+    text = manager.take_persist(0.0)
+    assert f"timestamp {manager.signing.timestamp}" in text and "clean 0" in text and KEY.hex() in text
+    assert manager.persist_deadline() is None, "taken: not due again until it moves"
+    manager.persist_failed("disk full")
+    assert manager.persist_deadline() == 0.0 and manager.save_error == "disk full"
+    SigningStore.write(store.path, manager.take_persist(0.0))
+    manager.persist_done()
+    assert store.load().timestamp == manager.signing.timestamp and manager.save_error is None
+    assert oct(store.path.stat().st_mode & 0o777) == "0o600"
