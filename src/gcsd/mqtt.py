@@ -107,9 +107,11 @@ def frame_target_system(raw: bytes) -> int:
 def topic_source_sysid(topic: str) -> int | None:
     """Role ground: the S of TOPIC/up/S/C, which every frame of the message must come from (so a
     broker ACL that lets each vehicle publish only under its own up/S is not bypassed by a
-    spoofed source sysid); None when the topic has no number there (nothing can match it)."""
+    spoofed source sysid); None when the topic has no system number there (nothing can match it)."""
     part = topic.rsplit("/", 2)[-2]
-    return int(part) if part.isdecimal() and len(part) <= 3 else None
+    if not (part.isascii() and part.isdecimal()) or str(int(part)) != part or int(part) > MAX_SYSID:
+        return None  # only the spelling gcsd publishes (up/7, not up/007): the one an ACL names
+    return int(part)
 
 
 class Topics:

@@ -8,7 +8,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.config import ConfigError, load_config, parse_config
 from gcsd.config_mqtt import MqttConfig, parse_broker, route_capacity
-from gcsd.mqtt import Topics, frame_source, frame_target_system
+from gcsd.mqtt import Topics, frame_source, frame_target_system, topic_source_sysid
 
 
 def channel(extra: str) -> str:
@@ -141,6 +141,13 @@ def test_topics():
 
 
 FLEET = Path(__file__).resolve().parents[2] / "sitl" / "fleet"
+
+
+@pytest.mark.parametrize(("topic", "sysid"), [("f/up/7/1", 7), ("a/b/up/255/190", 255), ("f/up/0/0", 0),
+                                               ("f/up/007/1", None), ("f/up/256/1", None), ("f/up/x/1", None),
+                                               ("f/up/+7/1", None), ("f/up/\u0667/1", None), ("f/up//1", None)])
+def test_the_system_an_uplink_topic_names_is_read_only_as_gcsd_spells_it(topic, sysid):
+    assert topic_source_sysid(topic) == sysid
 
 
 @pytest.mark.parametrize("name", ["vehicles.yaml", "ground.yaml"])
