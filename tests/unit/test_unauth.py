@@ -178,3 +178,24 @@ def test_where_no_signature_is_needed_a_flood_from_one_host_pushes_out_only_its_
     assert not station.closed and station.key in ch.peers
     ch.receive(station.peer, heartbeat(), 1.0)
     assert ch.stats.unauthenticated_closed == 98
+
+
+def test_the_descriptor_budget_counts_every_tcp_connection_a_channel_can_hold_and_raises_the_soft_limit():
+    import resource
+
+    from gcsd.config import parse_config
+    from gcsd.tcpserver import FD_RESERVE, descriptors_needed, ensure_descriptor_budget
+
+    config = parse_config("channels:\n"
+                          "  - {name: a, type: tcp-server, address: '127.0.0.1:0', max_peers: 64}\n"
+                          "  - {name: b, type: tcp-server, address: '127.0.0.1:0'}\n"
+                          "  - {name: c, type: udp-server, address: '127.0.0.1:0', max_peers: 64}\n", "t.yaml")
+    assert descriptors_needed(config.channels) == FD_RESERVE + 65 + 9, "udp peers hold no descriptor"
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    try:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (256, hard))
+        assert ensure_descriptor_budget(300) == (min(300, hard), 300)
+        assert resource.getrlimit(resource.RLIMIT_NOFILE)[0] == min(300, hard)
+        assert ensure_descriptor_budget(100) == (min(300, hard), 100), "never lowered"
+    finally:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
