@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import asyncio
 import errno
+import functools
 import resource
 import socket
 from collections.abc import Callable, Iterable
@@ -71,11 +72,14 @@ class Listener:
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             task = self.loop.create_task(self.loop.connect_accepted_socket(self.factory, conn))
             self._connecting.add(task)
-            task.add_done_callback(self._connected)
+            task.add_done_callback(functools.partial(self._connected, conn))
 
-    def _connected(self, task: asyncio.Task) -> None:
+    def _connected(self, conn: socket.socket, task: asyncio.Task) -> None:
         self._connecting.discard(task)
-        if not task.cancelled() and task.exception() is not None:
+        if task.cancelled():  # closed before its transport took the socket (a second close is harmless)
+            conn.close()
+        elif task.exception() is not None:
+            conn.close()
             log.warning("connection_setup_failed", channel=self.channel.name, error=str(task.exception()))
 
     def _failed(self, exc: OSError) -> None:
