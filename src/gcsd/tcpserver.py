@@ -111,11 +111,16 @@ class Listener:
             task.cancel()
 
 
-def listen(host: str, port: int) -> socket.socket:
-    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+async def listen(host: str, port: int) -> socket.socket:
+    """A listening socket on HOST:PORT (an IPv4 or IPv6 address, or a name, resolved without
+    blocking the loop)."""
+    infos = await asyncio.get_running_loop().getaddrinfo(host, port, type=socket.SOCK_STREAM,
+                                                         flags=socket.AI_PASSIVE)
+    family, _, _, _, address = infos[0]
+    sock = socket.socket(family, socket.SOCK_STREAM)
     try:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # TIME_WAIT of a previous run
-        sock.bind((host, port))
+        sock.bind(address)
         sock.listen(128)
     except OSError:
         sock.close()

@@ -229,7 +229,7 @@ async def _open(channel: Channel, baud: int | None = None):
         return await channel.open()
     if kind == "tcp-server":
         host, port = cfg.address
-        server = Listener(channel, listen(host, port), lambda: _Stream(channel, server=True))
+        server = Listener(channel, await listen(host, port), lambda: _Stream(channel, server=True))
         channel.local_address = server.sock.getsockname()[:2]
         closed = loop.create_future()
 

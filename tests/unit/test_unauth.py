@@ -146,7 +146,7 @@ def test_accept_out_of_descriptors_pauses_counts_and_logs_once_then_accepts_agai
             accepted.append(transport)
 
     async def main():
-        sock = OutOfDescriptors(listen("127.0.0.1", 0))
+        sock = OutOfDescriptors(await listen("127.0.0.1", 0))
         listener = Listener(ch, sock, Proto, pause_s=0.05)
         client = socket.create_connection(sock.getsockname())
         await asyncio.sleep(0.5)  # the listening socket stays readable all along
@@ -168,6 +168,31 @@ def test_accept_out_of_descriptors_pauses_counts_and_logs_once_then_accepts_agai
     assert ch.stats.accept_failures == attempts
     assert [e["event"] for e in logs].count("accept_failed") == 1, "logged once per interval (the clock stood still)"
     assert len(accepted) == 1, "accepted once descriptors were free again (the positive control)"
+
+
+def test_a_tcp_server_listens_on_ipv4_ipv6_and_names():
+    import asyncio
+    import socket
+
+    from gcsd.tcpserver import listen
+
+    hosts = {"127.0.0.1": socket.AF_INET, "localhost": socket.AF_INET}
+    try:  # only where the machine has IPv6 loopback (some containers do not)
+        with socket.socket(socket.AF_INET6) as probe:
+            probe.bind(("::1", 0))
+        hosts["::1"] = socket.AF_INET6
+    except OSError:
+        pass
+
+    async def families() -> dict[str, int]:
+        out = {}
+        for host in hosts:
+            sock = await listen(host, 0)
+            out[host] = sock.family
+            sock.close()
+        return out
+
+    assert asyncio.run(families()) == hosts
 
 
 def test_where_no_signature_is_needed_a_flood_from_one_host_pushes_out_only_its_own():
