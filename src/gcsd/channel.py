@@ -370,6 +370,16 @@ class Channel:
         return self.out.send_message(msg, sysid, compid)
 
     # --- counters --------------------------------------------------------------------------
+    def loss(self, sysid: int, compid: int) -> tuple[float, int]:
+        """How lossy the link from (sysid, compid) has been lately, measured by the sequence gaps
+        its peer's parser saw: (share of frames missing, frames measured over)."""
+        best = (0.0, 0)
+        for peer in self.peers.values():
+            measured = peer.parser.stats.loss((sysid, compid))
+            if measured[1] > best[1]:
+                best = measured
+        return best
+
     def snapshot(self) -> dict[str, int]:
         """Counters of the channel and all its peers, past and present. packets_in and bytes_in
         count accepted frames only: a rejected frame shows in signature_rejects alone."""

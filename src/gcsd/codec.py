@@ -129,10 +129,23 @@ class ParseStats:
     crc_errors: int = 0
     unknown_ids: int = 0
     seq_gaps: int = 0
-    last_seq: dict[tuple[int, int], int] = field(default_factory=dict)
+    # per source (sysid, compid): [last seq, frames, frames missing], the counts halved every
+    # LOSS_WINDOW frames so they describe the recent link (`loss`)
+    last_seq: dict[tuple[int, int], list[int]] = field(default_factory=dict)
+
+    def loss(self, source: tuple[int, int]) -> tuple[float, int]:
+        """The share of `source`'s frames that went missing lately (sequence gaps), and over how
+        many frames that was measured (0: never heard)."""
+        entry = self.last_seq.get(source)
+        if entry is None:
+            return 0.0, 0
+        seen = entry[1] + entry[2]
+        return (entry[2] / seen if seen else 0.0), seen
 
 
 MAX_SOURCES_TRACKED = 256
+LOSS_WINDOW = 256  # frames per source after which the loss counts are halved
+MAX_GAP = 128  # a larger jump is a restart, a duplicate or reordering, not loss
 
 
 class FrameParser:
@@ -230,12 +243,19 @@ class FrameParser:
                 frame = Frame(raw, msgid, sysid, compid, seq, version, True, ts, tc)
             stats.frames += 1
             key = (sysid, compid)
-            last = stats.last_seq.get(key)
-            if last is not None:
-                stats.seq_gaps += (seq - last - 1) & 0xFF
-                stats.last_seq[key] = seq
+            entry = stats.last_seq.get(key)
+            if entry is not None:
+                gap = (seq - entry[0] - 1) & 0xFF
+                stats.seq_gaps += gap
+                entry[0] = seq
+                entry[1] += 1
+                if gap < MAX_GAP:
+                    entry[2] += gap
+                if entry[1] >= LOSS_WINDOW:
+                    entry[1] >>= 1
+                    entry[2] >>= 1
             elif len(stats.last_seq) < MAX_SOURCES_TRACKED:
-                stats.last_seq[key] = seq
+                stats.last_seq[key] = [seq, 1, 0]
             frames.append(frame)
             i += total
         self._buf = buf[i:] if i < n else b""

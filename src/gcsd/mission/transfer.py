@@ -50,6 +50,10 @@ same ground station asks for again since its REQUEST_LIST is sent twice* (the re
 reply was lost: MAVSDK abandons a whole download after 5 tries of one item, so on a lossy link
 the second copy is what lets it finish; clients ignore the duplicate). The GCS's final
 MISSION_ACK of a download needs no answer. This bookkeeping is kept for 8 ground stations.
+*On a lossy link (`lossy(origin)`, measured from sequence gaps) the count and each answer go more
+than once, the items after the one asked for go right behind it, and a silent requester gets
+them again (download.py); those extra copies are `Send(optional=True)`: sent only with room in
+the link's byte budget.
 """
 
 from __future__ import annotations
@@ -60,6 +64,7 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..rtt import INITIAL_RTO_S, RttEstimator, RttTable
+from .download import COUNT_COPIES, ITEM_COPIES, DownloadAssist
 from .items import MissionItem, item_float_message, item_int_message
 from .stores import PlanStore
 
@@ -91,6 +96,7 @@ class Origin:
 class Send:
     channel: Hashable
     msg: object
+    optional: bool = False  # a copy for a lossy link: only if the byte budget has room
 
 
 @dataclass(frozen=True, slots=True)
@@ -138,9 +144,12 @@ class MissionTransfer:
     def __init__(self, store: PlanStore, retry_s: float = RETRY_S, abort_s: float = ABORT_S,
                  slowdown_s: Callable[[Hashable], float] = lambda channel: 0.0,
                  queued_s: Callable[[Hashable], float] = lambda channel: 0.0,
-                 rtt: RttTable | None = None) -> None:
+                 rtt: RttTable | None = None, lossy: Callable[[Origin], bool] = lambda origin: False) -> None:
         """`rtt`: the per-peer estimates, shared by the three types (a private table if None);
-        `slowdown_s` / `queued_s`: a channel's radio slowdown and byte-budget backlog, seconds."""
+        `slowdown_s` / `queued_s`: a channel's radio slowdown and byte-budget backlog, seconds;
+        `lossy`: whether the link a requester is on loses frames (download.py)."""
+        self.lossy = lossy
+        self.assist = DownloadAssist()
         self.store = store
         self.retry_s = retry_s
         self.abort_s = abort_s
@@ -168,9 +177,10 @@ class MissionTransfer:
 
     def next_deadline(self) -> float | None:
         up = self._upload
+        assist = self.assist.next_deadline()
         if up is None:
-            return None
-        return min(up.deadline_s, up.last_item_s + self.abort_s)
+            return assist
+        return min(up.deadline_s, up.last_item_s + self.abort_s, *([] if assist is None else [assist]))
 
     # --- upload ------------------------------------------------------------------------------
     def mission_count(self, origin: Origin, count: int, now: float) -> list[Output]:
@@ -235,6 +245,8 @@ class MissionTransfer:
         """A MISSION_ACK from the uploader ends its upload (cancelled); anything else is ignored."""
         if self._upload is not None and self._upload.owner == origin.node:
             self._upload = None
+        else:
+            self.assist.finish(origin.node)  # a download's end
         return []
 
     # --- download ----------------------------------------------------------------------------
@@ -243,7 +255,11 @@ class MissionTransfer:
             return [self._ack(origin, DENIED)]
         self._download_warned.discard(origin.node)
         self._answered.pop(origin.node, None)
-        return [self._count(origin)]
+        self.assist.finish(origin.node)
+        count = self._count(origin)
+        if not self.lossy(origin):
+            return [count]
+        return [count] + [Send(count.channel, count.msg, True)] * (COUNT_COPIES - 1)
 
     def mission_request(self, origin: Origin, seq: int, legacy: bool, now: float) -> list[Output]:
         if self._upload is not None and not legacy:
@@ -251,17 +267,33 @@ class MissionTransfer:
         item = self.store.item(seq)
         if item is None:
             return [self._count(origin), self._ack(origin, M.MAV_MISSION_INVALID_SEQUENCE)]
-        target = origin.node
         copies = REPEAT_COPIES if self._asked_before(origin.node, seq) else 1
-        if not legacy:
-            return [Send(origin.channel, item_int_message(item, seq, self.mission_type, target))] * copies
         out: list[Output] = []
-        if origin.node not in self._download_warned:
+        if legacy and origin.node not in self._download_warned:
             if len(self._download_warned) >= MAX_REQUESTERS:
                 self._download_warned.clear()
             self._download_warned.add(origin.node)
             out.append(Text(M.MAV_SEVERITY_WARNING, LEGACY_REQUEST_TEXT, origin.channel))
-        out += [Send(origin.channel, item_float_message(item, seq, self.mission_type, target))] * copies
+        answer = self._item_message(seq, item, origin.node, legacy)
+        out += [Send(origin.channel, answer)] * copies
+        if self.lossy(origin):
+            out += [Send(origin.channel, answer, True)] * max(0, ITEM_COPIES - copies)
+            ahead = self.assist.requested(origin.node, origin.channel, seq, self.store.count(), legacy, now)
+            out += self._pushed(origin.channel, origin.node, legacy, ahead)
+        return out
+
+    def _item_message(self, seq: int, item: MissionItem, target: tuple[int, int], legacy: bool):
+        if legacy:
+            return item_float_message(item, seq, self.mission_type, target)
+        return item_int_message(item, seq, self.mission_type, target)
+
+    def _pushed(self, channel: Hashable, target: tuple[int, int], legacy: bool, seqs: range) -> list[Output]:
+        """Items sent unasked to a download on a lossy link (download.py): optional copies."""
+        out: list[Output] = []
+        for seq in seqs:
+            item = self.store.item(seq)
+            if item is not None:
+                out.append(Send(channel, self._item_message(seq, item, target, legacy), True))
         return out
 
     def _asked_before(self, node: tuple[int, int], seq: int) -> bool:
@@ -333,6 +365,12 @@ class MissionTransfer:
 
     # --- time --------------------------------------------------------------------------------
     def tick(self, now: float) -> list[Output]:
+        out: list[Output] = []
+        for push in self.assist.tick(now):
+            out += self._pushed(push.channel, push.node, push.legacy, push.seqs)
+        return out + self._tick_upload(now)
+
+    def _tick_upload(self, now: float) -> list[Output]:
         up = self._upload
         if up is None:
             return []

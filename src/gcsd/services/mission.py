@@ -43,6 +43,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from ..atomic import write_atomic
 from ..config import MissionConfig
 from ..mission import wpl
+from ..mission.download import is_lossy
 from ..mission.items import MissionItem, from_item_float, from_item_int
 from ..mission.stores import FenceStore, MissionStore, PlanStore, RallyStore
 from ..mission.transfer import MissionTransfer, Origin, PlanChanged, Send, Text
@@ -84,7 +85,7 @@ class MissionService(Service):
         self.rtt = RttTable(max_s=retry_s)  # starts at INITIAL_RTO_S, never beyond retry_ms
         self.transfers = {
             s.mission_type: MissionTransfer(s, retry_s=retry_s, slowdown_s=self._slowdown_s,
-                                            queued_s=self._queued_s, rtt=self.rtt)
+                                            queued_s=self._queued_s, rtt=self.rtt, lossy=_lossy)
             for s in stores
         }
         self.guided_handler: Callable[[MissionItem, int], bool] | None = None
@@ -279,7 +280,8 @@ class MissionService(Service):
         ctx = self.ctx
         for out in outputs:
             if isinstance(out, Send):
-                ctx.reply(out.channel, out.msg)
+                if not out.optional or out.channel.has_room():
+                    ctx.reply(out.channel, out.msg)
             elif isinstance(out, Text):
                 ctx.text(out.severity, out.text, None if out.channel is None else {out.channel.index})
             elif isinstance(out, PlanChanged):
@@ -291,6 +293,8 @@ class MissionService(Service):
         for t in self.transfers.values():
             if t.receiving:  # a request went out or is due: its deadline may be sooner than the
                 self.ctx.wake(t.upload_channel)  # channel task's next pass (tens of ms on loopback)
+            for channel in t.assist.channels():  # likewise a lossy download's next push
+                self.ctx.wake(channel)
 
     def _push_current(self) -> None:
         self.ctx.push(M.MAVLINK_MSG_ID_MISSION_CURRENT)
@@ -339,6 +343,11 @@ class MissionService(Service):
         except OSError as exc:
             kept = f"not renamed: {exc}"
         log.error("mission_file_invalid", type=store.name, path=str(path), reason=reason, kept_as=str(kept))
+
+
+def _lossy(origin: Origin) -> bool:
+    """Whether the requester's link loses frames (its sequence gaps, measured per peer)."""
+    return is_lossy(*origin.channel.loss(origin.sysid, origin.compid))
 
 
 _TYPE_NAMES = {M.MAV_MISSION_TYPE_MISSION: "mission", M.MAV_MISSION_TYPE_FENCE: "fence",
