@@ -11,7 +11,8 @@ datagrams (44 bytes, MAVLink2, distinct sequence numbers in param1, as bench/fra
 (200, 190) to (250, 1) go through `Channel.receive(peer, data, now, datagram=True)`, in batches
 of 64 with one `now` per batch (the transport's rule), and the receiver's writer counts what it
 gets. Timed: process CPU time for the N frames, best of 5 runs; reported as microseconds per
-routed frame. "250 routes": first 248 more sources (sysid 2..249 on `b`, compid 1) are learned,
+routed frame. Also 20 routes with the HTTP API off (`http.address: null`; on by default, it taps every frame).
+"250 routes": first 248 more sources (sysid 2..249 on `b`, compid 1) are learned,
 so the table holds 250 routes, as a fleet ground side does.
 """
 
@@ -29,12 +30,13 @@ RUNS = 5
 BATCH = 64
 
 
-def _config(tmp: str, routes: int):
+def _config(tmp: str, routes: int, extra: dict | None = None):
+    extra = extra or {}
     from gcsd.config import parse_config
 
     streams = {name: 0 for name in ("raw_sens", "ext_stat", "rc_chan", "raw_ctrl", "position", "extra1",
                                     "extra2", "extra3", "params", "adsb")}
-    data = {"state_dir": tmp, "log": {"level": "warning"},
+    data = {"state_dir": tmp, "log": {"level": "warning"}, **extra,
             "channels": [{"name": "a", "type": "udp-server", "address": "127.0.0.1:0", "streams": streams},
                          {"name": "b", "type": "udp-server", "address": "127.0.0.1:0", "streams": streams}]}
     if routes > 20:
@@ -58,13 +60,13 @@ def _heartbeat(sysid: int, compid: int, mav_type: int = M.MAV_TYPE_GCS) -> bytes
     return bytes(M.MAVLink_heartbeat_message(mav_type, M.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3).pack(mav))
 
 
-def measure(routes: int) -> tuple[float, int]:
+def measure(routes: int, extra: dict | None = None) -> tuple[float, int]:
     import tempfile
 
     from gcsd.gcs import GCS
 
     with tempfile.TemporaryDirectory() as tmp:
-        gcs = GCS(_config(tmp, routes))
+        gcs = GCS(_config(tmp, routes, extra))
         a, b = gcs.channels[0], gcs.channels[1]
         got = [0]
 
@@ -100,6 +102,9 @@ def main() -> None:
     for routes in (20, 250):
         us, got = measure(routes)
         print(f"{routes:>4} routes: {us:6.2f} us per routed frame (the receiver got {got} of {N})")
+    if "http" in _config("/tmp", 20).__dataclass_fields__:  # the HTTP API's tap on every frame, off
+        us, got = measure(20, {"http": {"address": None}})
+        print(f"  20 routes, http.address null: {us:6.2f} us per routed frame")
     sys.stdout.flush()
 
 
