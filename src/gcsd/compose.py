@@ -249,6 +249,7 @@ def build_vehicle(index: int, config: Config, clock, channels: list[Channel], wa
     node.control = w.services["control"]
     node.plans = w.services["mission"]
     node.attach(built, registry.handlers)
+    node.flushers.append(w.services["mission"].close)  # an upload's plan write in flight
     node.registry = registry  # who registered what (tests/unit/test_architecture.py)
     param_service.save()  # the boot count
     return node

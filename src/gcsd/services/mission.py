@@ -16,8 +16,10 @@ channel's backlog is its byte budget's deficit at its bandwidth (a full token bu
 queued; an empty one: 100 ms of traffic still in the radio).
 
 Persistence: `<state_dir>/mission.waypoints`, `fence.waypoints`, `rally.waypoints` (QGC WPL 110),
-written with gcsd.atomic (temporary file, fsync, rename, fsync of the directory) *before* a plan
-is adopted, so a crash at any moment leaves the previous plan or the new one. Read at start; a
+written with gcsd.atomic (temporary file, fsync, rename, fsync of the directory), so a crash at
+any moment leaves the previous plan or the new one. An upload's plan is written off the event
+loop and its MISSION_ACK held until the file is durable (planwriter.py); a clear and an FTP
+plan write are written before the plan is adopted. Read at start; a
 file that cannot be read or is not a valid plan is logged (`mission_file_invalid`, with the
 reason) and renamed to `<name>.waypoints.invalid`, never silently overwritten; that type starts
 empty.
@@ -40,7 +42,6 @@ from pathlib import Path
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from ..atomic import write_atomic
 from ..config import MissionConfig
 from ..mission import wpl
 from ..mission.download import is_lossy
@@ -51,6 +52,7 @@ from ..rtt import RttTable
 from ..sim.geo import deg_e7
 from . import Incoming, Service
 from .commands import CommandRequest
+from .planwriter import PlanWriter
 
 log = structlog.get_logger("gcsd.mission")
 
@@ -73,6 +75,7 @@ class MissionService(Service):
     def __init__(self, ctx, config: MissionConfig = MissionConfig(), state_dir: Path | None = None) -> None:
         self.ctx = ctx
         self.state_dir = None if state_dir is None else Path(state_dir)
+        self.writer = PlanWriter(ctx.errors, ctx.now)  # an upload's plan written off the loop
         self.mission = MissionStore(config.max_items, lambda: home_item(ctx.state), self._saver("mission"))
         self.fence = FenceStore(config.max_fence, self._saver("fence"))
         self.rally = RallyStore(config.max_rally, self._saver("rally"))
@@ -122,8 +125,19 @@ class MissionService(Service):
             self._guided(inc, item, m.current)
             return
         t = self._transfer(inc)
-        if t is not None:
-            self._run(t.mission_item(self._origin(inc), m.seq, item, legacy, inc.now))
+        if t is None:
+            return
+        writer = self.writer
+        writer.deferring = True  # the last item's plan is written off the loop (planwriter.py)
+        try:
+            outputs = t.mission_item(self._origin(inc), m.seq, item, legacy, inc.now)
+        finally:
+            writer.deferring = False
+        if writer.deferred():
+            self._update_slow()
+            writer.hold(outputs, self._run)  # the ACK goes out once the plan is durable
+        else:
+            self._run(outputs)
 
     def handle_MISSION_ACK(self, inc: Incoming) -> None:
         t = self.transfers.get(inc.msg.mission_type)
@@ -324,7 +338,10 @@ class MissionService(Service):
         path = self._path(name)
         if path is None:
             return lambda items: None
-        return lambda items: write_atomic(path, wpl.dumps(items))
+        return lambda items: self.writer.save(path, wpl.dumps(items), getattr(self, name))
+
+    def close(self) -> None:
+        self.writer.close()
 
     def _load(self, store: PlanStore) -> None:
         path = self._path(store.name)
