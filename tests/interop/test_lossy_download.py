@@ -38,7 +38,7 @@ from .conftest import mavproxy_script as _mavproxy_script
 from .test_mission_interop import ground_station
 
 ITEMS = 200
-LOSS = float(os.environ.get("HPROTO_LOSS", "0.2"))
+LOSS = 0.2
 RUNS = 20 if os.environ.get("GCSD_LONG_TESTS") else 2
 MAX_DOWNLOAD_S = 15.0  # about 1 s now on loopback; ten times that under a loaded machine
 LAT, LON = -353630000, 1491650000
