@@ -28,7 +28,7 @@ from pathlib import Path
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from . import telemetry
+from . import payload, telemetry
 from .autopilot.core import Autopilot
 from .channel import Channel
 from .config import ChannelConfig, Config
@@ -78,6 +78,15 @@ OVERRIDES: dict[tuple[str, int | str], tuple[str, str]] = {
     (COMMAND, M.MAV_CMD_NAV_LOITER_UNLIM): ("vehicle", "flight"),
     (COMMAND, M.MAV_CMD_DO_PARACHUTE): ("vehicle", "peripherals"),
     (COMMAND, M.MAV_CMD_AIRFRAME_CONFIGURATION): ("vehicle", "peripherals"),
+    # a fitted gimbal, camera or CAN bus answers what peripherals answers "no such device" to
+    **{(COMMAND, cmd): ("gimbal", "peripherals") for cmd in (
+        M.MAV_CMD_DO_MOUNT_CONFIGURE, M.MAV_CMD_DO_MOUNT_CONTROL, M.MAV_CMD_DO_GIMBAL_MANAGER_CONFIGURE,
+        M.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW, M.MAV_CMD_DO_SET_ROI_SYSID)},
+    **{(COMMAND, cmd): ("camera", "peripherals") for cmd in (
+        M.MAV_CMD_DO_DIGICAM_CONTROL, M.MAV_CMD_DO_SET_CAM_TRIGG_DIST, M.MAV_CMD_IMAGE_START_CAPTURE,
+        M.MAV_CMD_IMAGE_STOP_CAPTURE, M.MAV_CMD_VIDEO_START_CAPTURE, M.MAV_CMD_VIDEO_STOP_CAPTURE,
+        M.MAV_CMD_SET_CAMERA_FOCUS)},
+    (COMMAND, M.MAV_CMD_CAN_FORWARD): ("can", "peripherals"),
 }
 
 
@@ -158,6 +167,9 @@ SERVICES: tuple[tuple[str, Callable[[VehicleNode, Wiring], object]], ...] = (
                                        {"logs": log_dir(node.state_dir, w.config)})),
     ("signing", lambda node, w: SigningService(node, w.signing)),
     ("logs", lambda node, w: flight_log_service(node, w.config)),
+    ("gimbal", payload.gimbal_service),  # these three: None unless configured (payload.py)
+    ("camera", payload.camera_service),
+    ("can", payload.can_service),
 )
 
 
@@ -207,10 +219,10 @@ def build_vehicle(index: int, config: Config, clock, channels: list[Channel], wa
     vtype = vehicle_type(vcfg.type)
     state_dir = vehicle_state_dir(config, index)
     now = clock.now()
-    store = ParamStore(vehicle_params(  # ArduPilot's set for the vehicle type (gcsd.params.defs)
-        vtype, vcfg.sysid + index, config.gcs.sysid, config.gcs.enforce_sysid,
+    store = ParamStore(payload.payload_params(vehicle_params(  # ArduPilot's set for the vehicle type
+        vtype, vcfg.sysid + index, config.gcs.sysid, config.gcs.enforce_sysid,  # (gcsd.params.defs)
         [dict(ch.config.streams) for ch in channels], vcfg.speedup,
-    ))
+    ), config))
     param_service = ParamService(None, store, state_dir / "mav.parm", now)
     param_service.load(config.params_file)
     _start_sysid(index, config, store, sysid)
@@ -220,7 +232,8 @@ def build_vehicle(index: int, config: Config, clock, channels: list[Channel], wa
     store.set("STAT_BOOTCNT", store.get("STAT_BOOTCNT") + 1, force=True)
     capacity = float(store.get("BATT_CAPACITY")) if "BATT_CAPACITY" in store else 0.0
     node = VehicleNode(index, vtype, clock, channels, store, initial_state(vtype, vcfg.home, index, capacity),
-                       vcfg.compid, state_dir, wake, errors, producers or telemetry.producers(), param_service.save)
+                       vcfg.compid, state_dir, wake, errors, dict(producers or telemetry.producers()),
+                       param_service.save)  # each vehicle its own table: a gimbal adds to it
     node.flushers.append(writer.flush)
     node.syncers.append(writer.sync)
     param_service.ctx = node

@@ -1,39 +1,55 @@
-"""What a vehicle carries (SPEC.md "Camera, gimbal and CAN"), wired onto a vehicle node.
+"""What a vehicle carries (SPEC.md "Camera, gimbal and CAN"), built for the composition root.
 
-`payload_params(defs, config)`: the parameter definitions with the MNT1_ group when
-`vehicle.gimbal` is on (before the store is built, so a saved MNT1_ value loads).
-`attach_payload(node, config)`: with `vehicle.gimbal`, the gimbal manager (gimbal/service.py) on
-the autopilot component, taking the autopilot's ROI; with `vehicle.camera`, the camera component
-(compid 100, camera/service.py) with its own command table, the autopilot's camera commands and
-the mission's camera items; with `can.buses` (the first vehicle only: one owner per bus), CAN over
-MAVLink (can/service.py). With all three off (the default) nothing is added and the commands keep
-their "no such device" answers (services/peripherals.py).
+- `payload_params(defs, config)`: the parameter definitions with the MNT1_ group when
+  `vehicle.gimbal` is on (before the store is built, so a saved MNT1_ value loads).
+- `gimbal_service(node, w)`: with `vehicle.gimbal`, the gimbal manager on the autopilot
+  component; it takes the autopilot's ROI (`Autopilot.mount_roi`), and its producers join the
+  vehicle's table (GIMBAL_MANAGER_*, GIMBAL_DEVICE_ATTITUDE_STATUS).
+- `camera_service(node, w)`: with `vehicle.camera`, the camera component (compid 100) on the
+  gimbal when there is one; the autopilot's camera commands; the mission's camera items
+  (`Autopilot.payload_items`).
+- `can_service(node, w)`: with `can.buses`, CAN over MAVLink, for the first vehicle only (one
+  owner per bus, even in a swarm).
+Each returns None when its switch is off (the default): the commands then keep their "no such
+device" answers (services/peripherals.py), and compose.OVERRIDES says who wins when it is on.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-
-from .camera.service import CAMERA_COMPID, CameraService
+from .camera.service import CameraService
 from .gimbal.params import with_mount_params
 from .gimbal.service import GimbalService
+from .gimbal.telemetry import gimbal_producers
+
+EXTRA3 = "extra3"  # the stream GIMBAL_DEVICE_ATTITUDE_STATUS is in (streams.py)
 
 
 def payload_params(defs: list, config) -> list:
     return with_mount_params(defs) if config.vehicle.gimbal else defs
 
 
-def attach_payload(node, config) -> None:
-    now = node.clock.now()
-    if config.vehicle.gimbal:
-        gimbal = GimbalService(node, now, previous_position_handler=node.handlers.get("GLOBAL_POSITION_INT"))
-        node.gimbal = gimbal
-        node.sim.mount_roi = gimbal.roi
-        node.add_service(gimbal)
-    if config.vehicle.camera:
-        ftp_root = Path(node.state_dir) / config.ftp.root if node.state_dir is not None else None
-        camera = CameraService(node, ftp_root, now)
-        node.camera = camera
-        node.add_service(camera)
-        node.commands.add_component(CAMERA_COMPID, camera.camera_commands())
-        node.sim.payload_items.update(camera.mission_items())
+def gimbal_service(node, w):
+    if not w.config.vehicle.gimbal:
+        return None
+    now = node.now()
+    service = GimbalService(node, now)
+    node.autopilot.mount_roi = service.roi
+    node.producers.update(gimbal_producers(service))
+    for link in node.links:  # the streams were set before this producer existed: EXTRA3 again, with it
+        link.set_stream_rate(EXTRA3, link.stream_rates[EXTRA3], now)
+    return service
+
+
+def camera_service(node, w):
+    if not w.config.vehicle.camera:
+        return None
+    service = CameraService(node, node.state_dir / w.config.ftp.root, node.now(), w.services.get("gimbal"))
+    node.autopilot.payload_items.update(service.mission_items())
+    return service
+
+
+def can_service(node, w):
+    if not w.config.can.buses or node.index != 0:
+        return None
+    from .can.service import CanService  # python-can and dronecan: loaded only when a bus is configured
+    return CanService(node, w.config.can)

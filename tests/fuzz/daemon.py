@@ -32,11 +32,12 @@ ACK_TIMEOUT_S = 2.0
 class FuzzedDaemon:
     """`gcsd run` in a subprocess with one UDP server channel, and a raw UDP socket talking to it."""
 
-    def __init__(self, tmp_path: Path, vehicle: str) -> None:
+    def __init__(self, tmp_path: Path, vehicle: str, extra_yaml: str = "", vehicle_keys: str = "") -> None:
         self.config = tmp_path / "gcsd.yaml"
         self.config.write_text(  # port 0: the daemon picks a free port and logs it (no race for a port)
-            f"vehicle: {{type: {vehicle}}}\nstate_dir: {tmp_path / 'state'}\nlog: {{level: info, format: json}}\n"
-            "channels:\n  - {name: gcs, type: udp-server, address: '127.0.0.1:0'}\n")
+            f"vehicle: {{type: {vehicle}{vehicle_keys}}}\nstate_dir: {tmp_path / 'state'}\n"
+            "log: {level: info, format: json}\n"
+            "channels:\n  - {name: gcs, type: udp-server, address: '127.0.0.1:0'}\n" + extra_yaml)
         self.log_path = tmp_path / "gcsd.log"
         self._log = self.log_path.open("ab")
         self.sock: socket.socket | None = None

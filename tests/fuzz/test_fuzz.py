@@ -48,9 +48,9 @@ HOME_E7 = (-353632620, 1491652370)  # the default home
 def fuzzed(tmp_path):
     started: list[FuzzedDaemon] = []
 
-    def start(vehicle: str) -> FuzzedDaemon:
+    def start(vehicle: str, extra_yaml: str = "", vehicle_keys: str = "") -> FuzzedDaemon:
         (tmp_path / vehicle).mkdir()
-        d = FuzzedDaemon(tmp_path / vehicle, vehicle)
+        d = FuzzedDaemon(tmp_path / vehicle, vehicle, extra_yaml, vehicle_keys)
         started.append(d)
         d.start()
         # every stream at 10 Hz: the telemetry producers run often on whatever state the fuzz leaves
@@ -164,3 +164,27 @@ def test_every_parameter_set_to_wild_values_in_flight_and_after_a_restart_leaves
     assert d.restart() == 0, d.log_tail()
     fly(d, vehicle)
     assert_still_serving(d, f"{vehicle} after a restart")
+
+
+PAYLOAD_VEHICLE_KEYS = ", camera: true, gimbal: true"
+CAMERA = (1, 100)
+
+
+@pytest.mark.parametrize("vehicle", ["copter", "plane"])
+def test_camera_gimbal_and_can_get_every_command_and_message_and_the_daemon_serves(fuzzed, vehicle, tmp_path):
+    """With the payload on (camera, gimbal, a virtual CAN bus with simulated nodes): every command to the
+    autopilot and to the camera component, every message id (CAN_FRAME, CANFD_FRAME, CAN_FILTER_MODIFY,
+    GIMBAL_MANAGER_SET_* among them) after a CAN_FORWARD, in flight, and every MNT1_ parameter wild."""
+    can = f"can:\n  buses:\n    - {{interface: virtual, channel: fuzz-{tmp_path.name}, nodes: [gps, battery]}}\n"
+    d = fuzzed(vehicle, can, PAYLOAD_VEHICLE_KEYS)
+    assert d.command(M.MAV_CMD_CAN_FORWARD, 1) == M.MAV_RESULT_ACCEPTED
+    fly(d, vehicle)
+    run_chunks(d, command_chunks(CAMERA, SEED + 4, ROUNDS), f"{vehicle} commands to the camera")
+    run_chunks(d, command_chunks(VEHICLE, SEED + 5, ROUNDS), f"{vehicle} commands with a payload")
+    assert d.command(M.MAV_CMD_CAN_FORWARD, 1) == M.MAV_RESULT_ACCEPTED
+    run_chunks(d, message_chunks(VEHICLE, SEED + 6, 2 * ROUNDS), f"{vehicle} messages with a payload")
+    names = [n for n in d.param_names() if n.startswith("MNT1_")]
+    assert len(names) == 19, names
+    run_chunks(d, param_chunks(names, VEHICLE, SEED + 7, ROUNDS), f"{vehicle} MNT1_ parameters")
+    fly(d, vehicle)
+    assert_still_serving(d, f"{vehicle} with a payload")

@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import ast
+import itertools
 import sys
 from pathlib import Path
 
@@ -154,10 +155,16 @@ def test_an_override_names_the_winner_whatever_the_order(order):
     assert registry.commands[M.MAV_CMD_DO_SET_MODE] is services["winner"].handler
 
 
-def _build(tmp_path, vehicle: str, overrides=OVERRIDES):
-    config = parse_config(yaml.safe_dump({"vehicle": {"type": vehicle}, "state_dir": str(tmp_path / vehicle),
-                                          "channels": [{"name": "gcs", "type": "udp-server",
-                                                        "address": "127.0.0.1:0"}]}), "t.yaml")
+PAYLOAD = {"vehicle": {"camera": True, "gimbal": True},
+           "can": {"buses": [{"interface": "virtual", "channel": "architecture"}]}}
+
+
+def _build(tmp_path, vehicle: str, overrides=OVERRIDES, payload: bool = False):
+    data = {"vehicle": {"type": vehicle}, "state_dir": str(tmp_path / vehicle / str(payload)),
+            "channels": [{"name": "gcs", "type": "udp-server", "address": "127.0.0.1:0"}]}
+    if payload:  # the camera, the gimbal and a CAN bus on: the services that override peripherals
+        data = {**data, **PAYLOAD, "vehicle": {**data["vehicle"], **PAYLOAD["vehicle"]}}
+    config = parse_config(yaml.safe_dump(data), "t.yaml")
     clock = Clock(monotonic=lambda: 100.0, wall=lambda: 1.8e9)
     channel = Channel(0, config.channels[0], clock.now)
     return build_vehicle(0, config, clock, [channel], lambda ch: None, ErrorCounts(),
@@ -166,10 +173,13 @@ def _build(tmp_path, vehicle: str, overrides=OVERRIDES):
 
 def test_every_vehicle_type_builds_and_every_override_is_one_that_happens(tmp_path):
     used = set()
-    for vehicle in VEHICLE_TYPES:
-        node = _build(tmp_path, vehicle)
+    for vehicle, payload in itertools.product(VEHICLE_TYPES, (False, True)):
+        node = _build(tmp_path, vehicle, payload=payload)
         used |= node.registry.overridden
         assert {type(s).__name__ for s in node.services} >= {"ControlService", "CommandService", "MissionService"}
+        for service in node.services:
+            if hasattr(service, "shutdown"):
+                service.shutdown(0.0)  # the CAN bus closed
     assert used == set(OVERRIDES), f"overrides no vehicle type needs: {set(OVERRIDES) - used}"
 
 
@@ -181,6 +191,7 @@ def test_without_the_overrides_the_real_tables_do_not_build(tmp_path):
 # --- the narrow context ---------------------------------------------------------------------------
 
 CONTEXT_USERS = [*sorted((PACKAGE / "services").glob("*.py")), *sorted((PACKAGE / "autopilot").glob("*.py")),
+                 PACKAGE / "gimbal" / "service.py", PACKAGE / "camera" / "service.py", PACKAGE / "can" / "service.py",
                  PACKAGE / "vehicles" / "commands.py", PACKAGE / "vehicles" / "prearm.py",
                  PACKAGE / "vehicles" / "health.py", PACKAGE / "vehicles" / "motors.py"]
 VIEW_USERS = sorted((PACKAGE / "telemetry").glob("*.py"))

@@ -8,6 +8,7 @@ import math
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from gcsd.gimbal.geometry import euler, quaternion
 from gcsd.gimbal.mount import (
     GPS_POINT,
     MAVLINK,
@@ -19,8 +20,6 @@ from gcsd.gimbal.mount import (
     Mount,
     MountParams,
     Pose,
-    euler,
-    quaternion,
 )
 from gcsd.gimbal.params import GROUP, mount_params, with_mount_params
 from gcsd.params.store import INT8, ParamDef

@@ -14,7 +14,7 @@ import math
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from ..gimbal.mount import quaternion
+from ..gimbal.geometry import quaternion
 from .camera import FOCAL_LENGTH_MM, STORAGE_TOTAL_MIB, Camera, Shot
 
 VENDOR, MODEL = b"gcsd", b"SimCam"

@@ -74,8 +74,9 @@ def _existing_photos(directory: Path) -> tuple[int, int]:
 
 
 class CameraService(Service):
-    def __init__(self, node, ftp_root: Path | None, now: float) -> None:
-        self.node = node
+    def __init__(self, ctx, ftp_root: Path | None, now: float, gimbal=None) -> None:
+        self.ctx = ctx
+        self.gimbal = gimbal  # the gimbal service the camera sits on, if any (its attitude, its device id)
         self.photo_dir = None if ftp_root is None else Path(ftp_root) / PHOTO_DIR
         highest, size = _existing_photos(self.photo_dir) if self.photo_dir is not None else (0, 0)
         self.camera = Camera(now, first_index=highest + 1)
@@ -91,6 +92,10 @@ class CameraService(Service):
                 "camera_outbox_dropped": self.outbox_dropped}
 
     # --- tables --------------------------------------------------------------------------------
+    def local_components(self) -> dict:
+        """The camera component: commands addressed to compid 100 run from its own table."""
+        return {CAMERA_COMPID: self.camera_commands()}
+
     def camera_commands(self) -> dict:
         """The camera component's own command table (compid 100)."""
         c = self.camera
@@ -123,7 +128,7 @@ class CameraService(Service):
     def mission_items(self) -> dict:
         """Mission DO items the autopilot hands to the camera (Autopilot.payload_items)."""
         c = self.camera
-        now = self.node.clock.now
+        now = self.ctx.now
         return {
             M.MAV_CMD_DO_DIGICAM_CONTROL: lambda item: c.digicam_control(item.x),
             M.MAV_CMD_DO_SET_CAM_TRIGG_DIST: lambda item: c.set_trigger_distance(item.param1, item.param3),
@@ -135,7 +140,7 @@ class CameraService(Service):
 
     # --- commands ------------------------------------------------------------------------------
     def _changed(self, req: CommandRequest, result: int) -> int:
-        self.node.wake(req.inc.channel)  # a photo or a status may be due at once
+        self.ctx.wake(req.inc.channel)  # a photo or a status may be due at once
         return result
 
     def image_start(self, req: CommandRequest) -> int:
@@ -186,19 +191,19 @@ class CameraService(Service):
         if msgid not in REQUESTABLE:
             return M.MAV_RESULT_DENIED
         self._queue(req.inc.channel.index, self._message(msgid, req.inc.now), CAMERA_COMPID)
-        self.node.wake(req.inc.channel)
+        self.ctx.wake(req.inc.channel)
         return ACCEPTED
 
     def legacy_request(self, req: CommandRequest) -> int:
         self._queue(req.inc.channel.index, self._message(LEGACY_REQUESTS[req.command], req.inc.now), CAMERA_COMPID)
-        self.node.wake(req.inc.channel)
+        self.ctx.wake(req.inc.channel)
         return ACCEPTED
 
     def _message(self, msgid: int, now: float):
-        time_ms = self.node.time_boot_ms(now)
+        time_ms = self.ctx.time_boot_ms(now)
         c = self.camera
         if msgid == M.MAVLINK_MSG_ID_CAMERA_INFORMATION:
-            return messages.information(time_ms, 1 if getattr(self.node, "gimbal", None) is not None else 0)
+            return messages.information(time_ms, 1 if self.gimbal is not None else 0)
         if msgid == M.MAVLINK_MSG_ID_CAMERA_SETTINGS:
             return messages.settings(time_ms, c)
         if msgid == M.MAVLINK_MSG_ID_CAMERA_CAPTURE_STATUS:
@@ -209,11 +214,10 @@ class CameraService(Service):
 
     # --- photos ----------------------------------------------------------------------------------
     def pose(self) -> CameraPose:
-        s = self.node.state
+        s = self.ctx.state
         roll, pitch, yaw = s.roll_rad, s.pitch_rad, s.yaw_rad
-        gimbal = getattr(self.node, "gimbal", None)
-        if gimbal is not None:  # the camera sits on the gimbal: earth-frame roll and pitch, yaw on the body
-            g_roll, g_pitch, g_yaw = gimbal.mount.attitude
+        if self.gimbal is not None:  # the camera sits on the gimbal: earth-frame roll and pitch, yaw on the body
+            g_roll, g_pitch, g_yaw = self.gimbal.mount.attitude
             roll, pitch, yaw = g_roll, g_pitch, (yaw + g_yaw) % (2 * math.pi)
         return CameraPose(s.lat, s.lon, s.alt_amsl_m, s.relative_alt_m, roll, pitch, yaw)
 
@@ -221,27 +225,26 @@ class CameraService(Service):
         ok = False
         url = ""
         if self.photo_dir is not None:
-            data = jpeg.encode(shot, self.node.clock.wall(), self.camera.focal_length_mm)
+            data = jpeg.encode(shot, self.ctx.wall(), self.camera.focal_length_mm)
             try:
                 self.photo_dir.mkdir(parents=True, exist_ok=True)
                 (self.photo_dir / shot.filename).write_bytes(data)
                 self.camera.stored(len(data))
                 ok = True
-                url = f"mftp://[;comp={self.node.compid}]/{(PHOTO_DIR / shot.filename).as_posix()}"
+                url = f"mftp://[;comp={self.ctx.compid}]/{(PHOTO_DIR / shot.filename).as_posix()}"
             except OSError as exc:
                 log.error("camera_photo_failed", file=shot.filename, error=str(exc))
         if ok:
             self.photos_written += 1
         else:
             self.photo_failures += 1
-        time_ms = self.node.time_boot_ms(shot.now)
-        captured = messages.image_captured(shot, time_ms, int(self.node.clock.wall() * 1e6), url, ok)
-        feedback = messages.camera_feedback(shot, self.node.time_usec(shot.now), self.photos_written)
-        for link in self.node.links:
-            index = link.channel.index
-            self._queue(index, captured, CAMERA_COMPID)
-            self._queue(index, feedback, self.node.compid)
-            self.node.wake(link.channel)
+        time_ms = self.ctx.time_boot_ms(shot.now)
+        captured = messages.image_captured(shot, time_ms, int(self.ctx.wall() * 1e6), url, ok)
+        feedback = messages.camera_feedback(shot, self.ctx.time_usec(shot.now), self.photos_written)
+        for channel in self.ctx.channels:
+            self._queue(channel.index, captured, CAMERA_COMPID)
+            self._queue(channel.index, feedback, self.ctx.compid)
+            self.ctx.wake(channel)
 
     def _queue(self, index: int, msg, compid: int) -> None:
         box = self.outbox.setdefault(index, [])
@@ -253,7 +256,7 @@ class CameraService(Service):
     def pending(self, channel, now: float, send) -> float | None:
         for shot in self.camera.step(now, self.pose()):
             self._take(shot, now)
-        sysid = self.node.sysid
+        sysid = self.ctx.sysid
         due = self._heartbeat_due.get(channel.index, 0.0)
         if now >= due:
             channel.send_message(M.MAVLink_heartbeat_message(

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from ..sim.geo import ne_m
+from .geometry import angles_to, clamp, euler, quaternion, wrap_pi
 
 SLEW_RATE_DEG_S = 60.0
 WARNING_INTERVAL_S = 30.0
@@ -96,38 +96,6 @@ class Target:
     is_rate: bool = False
 
 
-def wrap_pi(rad: float) -> float:
-    return (rad + math.pi) % (2 * math.pi) - math.pi
-
-
-def _clamp(v: float, lo: float, hi: float) -> float:
-    return max(lo, min(hi, v))
-
-
-def angles_to(pose: Pose, lat: float, lon: float, alt_amsl_m: float) -> tuple[float, float]:
-    """(pitch, earth-frame yaw) in radians from the vehicle to a location (get_angle_target_to_location)."""
-    north, east = ne_m(pose.lat, pose.lon, lat, lon)
-    return math.atan2(alt_amsl_m - pose.alt_amsl_m, math.hypot(north, east)), math.atan2(east, north)
-
-
-def quaternion(roll: float, pitch: float, yaw: float) -> list[float]:
-    """w, x, y, z of a 3-2-1 Euler rotation (ArduPilot's Quaternion::from_euler)."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return [cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
-            cr * cp * sy - sr * sp * cy]
-
-
-def euler(q: list[float]) -> tuple[float, float, float]:
-    """roll, pitch, yaw (rad) of a w, x, y, z quaternion."""
-    w, x, y, z = q
-    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = math.asin(_clamp(2 * (w * y - z * x), -1.0, 1.0))
-    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return roll, pitch, yaw
-
-
 class Mount:
     def __init__(self, params: MountParams, now: float, device_id: int = 1) -> None:
         self.params = params
@@ -167,12 +135,12 @@ class Mount:
 
     def set_angle_target(self, roll_deg: float, pitch_deg: float, yaw_deg: float, yaw_is_ef: bool) -> None:
         p = self.params
-        roll_deg = _clamp(roll_deg, p.roll_min_deg, p.roll_max_deg)
-        pitch_deg = _clamp(pitch_deg, p.pitch_min_deg, p.pitch_max_deg)
+        roll_deg = clamp(roll_deg, p.roll_min_deg, p.roll_max_deg)
+        pitch_deg = clamp(pitch_deg, p.pitch_min_deg, p.pitch_max_deg)
         if not yaw_is_ef:
             if yaw_deg > 180:
                 yaw_deg -= 360
-            yaw_deg = _clamp(yaw_deg, p.yaw_min_deg, p.yaw_max_deg)
+            yaw_deg = clamp(yaw_deg, p.yaw_min_deg, p.yaw_max_deg)
         self.target = Target(math.radians(roll_deg), math.radians(pitch_deg), math.radians(yaw_deg), yaw_is_ef)
         self.mode = MAVLINK
 
@@ -315,7 +283,7 @@ class Mount:
         elif mode in (GPS_POINT, HOME, SYSID):
             location = {GPS_POINT: self.roi, HOME: pose.home, SYSID: self.sysid_location}[mode]
             if location is not None:
-                pitch, yaw = angles_to(pose, *location)
+                pitch, yaw = angles_to(pose.lat, pose.lon, pose.alt_amsl_m, *location)
                 self.target = Target(0.0, pitch, yaw, True)
         elif self.target.is_rate:
             self._rate_angle = self._integrate(self._rate_angle, self.target, pose, dt)
@@ -324,8 +292,8 @@ class Mount:
 
     def _integrate(self, angle: Target, rate: Target, pose: Pose, dt: float) -> Target:
         p = self.params
-        roll = _clamp(angle.roll + rate.roll * dt, math.radians(p.roll_min_deg), math.radians(p.roll_max_deg))
-        pitch = _clamp(angle.pitch + rate.pitch * dt, math.radians(p.pitch_min_deg), math.radians(p.pitch_max_deg))
+        roll = clamp(angle.roll + rate.roll * dt, math.radians(p.roll_min_deg), math.radians(p.roll_max_deg))
+        pitch = clamp(angle.pitch + rate.pitch * dt, math.radians(p.pitch_min_deg), math.radians(p.pitch_max_deg))
         yaw = angle.yaw
         if angle.yaw_is_ef != rate.yaw_is_ef:
             yaw = wrap_pi(yaw + pose.yaw_rad) if rate.yaw_is_ef else wrap_pi(yaw - pose.yaw_rad)
@@ -333,15 +301,15 @@ class Mount:
         if rate.yaw_is_ef:
             yaw = wrap_pi(yaw)
         else:
-            yaw = _clamp(yaw, math.radians(p.yaw_min_deg), math.radians(p.yaw_max_deg))
+            yaw = clamp(yaw, math.radians(p.yaw_min_deg), math.radians(p.yaw_max_deg))
         return Target(roll, pitch, yaw, rate.yaw_is_ef)
 
     def _body(self, t: Target, pose: Pose) -> tuple[float, float, float]:
         p = self.params
         yaw = wrap_pi(t.yaw - pose.yaw_rad) if t.yaw_is_ef else t.yaw
-        return (_clamp(t.roll, math.radians(p.roll_min_deg), math.radians(p.roll_max_deg)),
-                _clamp(t.pitch, math.radians(p.pitch_min_deg), math.radians(p.pitch_max_deg)),
-                _clamp(yaw, math.radians(p.yaw_min_deg), math.radians(p.yaw_max_deg)))
+        return (clamp(t.roll, math.radians(p.roll_min_deg), math.radians(p.roll_max_deg)),
+                clamp(t.pitch, math.radians(p.pitch_min_deg), math.radians(p.pitch_max_deg)),
+                clamp(yaw, math.radians(p.yaw_min_deg), math.radians(p.yaw_max_deg)))
 
     def step(self, now: float, pose: Pose) -> None:
         """Slew towards the demand for the time since the last step."""
@@ -355,7 +323,7 @@ class Mount:
             error = demand[axis] - self.attitude[axis]
             if axis == 2 and self.params.yaw_max_deg - self.params.yaw_min_deg >= 360:
                 error = wrap_pi(error)  # a full-circle pan takes the short way round
-            move = _clamp(error, -limit, limit)
+            move = clamp(error, -limit, limit)
             self.attitude[axis] += move
             if axis == 2:
                 self.attitude[2] = wrap_pi(self.attitude[2])

@@ -7,8 +7,9 @@ ACCEPTED). DO_SET_ROI_LOCATION / DO_SET_ROI / DO_SET_ROI_NONE and the mission's 
 the mount through the autopilot's `mount_roi` hook (Copter's AutoYaw::set_roi: a gimbal that
 can pan points at the location; the vehicle keeps its own heading). Messages:
 GIMBAL_MANAGER_SET_PITCHYAW (radians, as the command in degrees), GIMBAL_MANAGER_SET_ATTITUDE,
-and GLOBAL_POSITION_INT from other systems (where DO_SET_ROI_SYSID's target is). Values that are
-not finite where a number is needed are ignored (messages) or refused at the edge (commands).
+and, through a tap on every accepted frame, GLOBAL_POSITION_INT from the system DO_SET_ROI_SYSID
+points at (as ArduPilot's mount reads it from any link). Values that are not finite where a
+number is needed are ignored (messages) or refused at the edge (commands).
 
 The mount is brought up to `now` (`sync`) whenever anything reads or changes it: a command, a
 message, a telemetry producer (gimbal/telemetry.py), a send pass; so its slew and a pointed
@@ -30,23 +31,18 @@ from .params import NAMES, mount_params
 MSG_ID_STATUS = M.MAVLINK_MSG_ID_GIMBAL_MANAGER_STATUS
 
 
-def _finite(*values: float) -> bool:
-    return all(math.isfinite(v) for v in values)
-
-
 class GimbalService(Service):
-    def __init__(self, node, now: float, previous_position_handler=None) -> None:
-        self.node = node
-        self.mount = Mount(mount_params(node.params.get), now)
-        self._previous_position = previous_position_handler  # e.g. an antenna tracker's own
+    def __init__(self, ctx, now: float) -> None:
+        self.ctx = ctx
+        self.mount = Mount(mount_params(ctx.params.get), now)
         for name in NAMES:
-            node.params.on_change(name, self._params_changed)
+            ctx.params.on_change(name, self._params_changed)
 
     def _params_changed(self, _name, _value) -> None:
-        self.mount.set_params(mount_params(self.node.params.get))
+        self.mount.set_params(mount_params(self.ctx.params.get))
 
     def pose(self) -> Pose:
-        s = self.node.state
+        s = self.ctx.state
         home = (s.home_lat, s.home_lon, s.home_alt_m) if s.has_home else None
         return Pose(s.lat, s.lon, s.alt_amsl_m, s.yaw_rad, home)
 
@@ -55,11 +51,10 @@ class GimbalService(Service):
         mount = self.mount
         mount.step(now, self.pose())
         for text in mount.take_texts():
-            self.node.send_text(M.MAV_SEVERITY_WARNING, text)
+            self.ctx.text(M.MAV_SEVERITY_WARNING, text)
         if mount.status_changed:
             mount.status_changed = False
-            for link in self.node.links:
-                link.push(MSG_ID_STATUS)
+            self.ctx.push(MSG_ID_STATUS)
         return mount
 
     # --- commands ------------------------------------------------------------------------------
@@ -77,14 +72,14 @@ class GimbalService(Service):
         return mount.pitchyaw(int(req.x), req.param1, req.param2, req.param3, req.param4, req.z)
 
     def configure(self, req: CommandRequest) -> int:
-        result = self.sync(req.inc.now).configure(req.param1, req.param2, req.inc.sender, req.z)
-        self.sync(req.inc.now)
+        result = self.mount.configure(req.param1, req.param2, req.inc.sender, req.z)
+        self.sync(req.inc.now)  # pushes GIMBAL_MANAGER_STATUS when control changed
         return result
 
     def mount_control(self, req: CommandRequest) -> int:
         mount = self.sync(req.inc.now)
         return mount.mount_control(req.param1, req.param2, req.param3, req.param4, int(req.x), int(req.y), req.z,
-                                   self.node.state.home_alt_m, req.inc.now)
+                                   self.ctx.state.home_alt_m, req.inc.now)
 
     def mount_configure(self, req: CommandRequest) -> int:
         return self.sync(req.inc.now).mount_configure(req.param1)
@@ -97,7 +92,7 @@ class GimbalService(Service):
         """The autopilot's ROI (lat, lon, alt AMSL; None: none): True when the gimbal takes it."""
         if not self.mount.params.has_pan:
             return False  # the vehicle has to turn to point the camera
-        self.sync(self.node.clock.now()).set_roi(location)
+        self.sync(self.ctx.now()).set_roi(location)
         return True
 
     # --- messages ------------------------------------------------------------------------------
@@ -115,11 +110,11 @@ class GimbalService(Service):
             return
         self.sync(inc.now).set_attitude(m.flags, list(m.q), rates, m.gimbal_device_id)
 
-    def handle_GLOBAL_POSITION_INT(self, inc: Incoming) -> None:
-        m = inc.msg
-        self.mount.target_position(inc.frame.sysid, m.lat / 1e7, m.lon / 1e7, m.alt / 1000.0)
-        if self._previous_position is not None:
-            self._previous_position(inc)
+    def tap(self, channel, frame, now: float) -> None:
+        """Every accepted frame (compose registers it): the ROI_SYSID target's GLOBAL_POSITION_INT."""
+        if frame.msgid == M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT and frame.sysid == self.mount.target_sysid:
+            m = frame.msg
+            self.mount.target_position(frame.sysid, m.lat / 1e7, m.lon / 1e7, m.alt / 1000.0)
 
     def pending(self, channel, now: float, send) -> float | None:
         self.sync(now)

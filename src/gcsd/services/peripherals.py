@@ -1,7 +1,9 @@
 """Commands for the devices an ArduPilot vehicle may carry, answered as ArduPilot's libraries do.
 
-gcsd simulates the vehicle, not its payload: there is no camera, gimbal, ADS-B transponder,
-CAN bus or scripting engine. ArduPilot SITL runs with the same libraries compiled in and no
+gcsd simulates the vehicle, not its payload unless asked: with no `vehicle.camera`,
+`vehicle.gimbal` or `can.buses` (the default) there is no camera, gimbal or CAN bus, and there
+is never an ADS-B transponder or scripting engine. (With them, gimbal/, camera/ and can/ answer
+those commands instead: compose.OVERRIDES.) ArduPilot SITL runs with the same libraries compiled in and no
 device configured, and its answers (`../shared/ardupilot/*-probe.json`) follow from that; gcsd
 gives the same answers for the same reason, and acts where it has the state:
 
