@@ -191,3 +191,18 @@ def test_without_the_camera_nothing_answers_from_compid_100(daemon, client):
     pump([gcs], 1.5)  # a camera heartbeats every second: in this window the autopilot's did, the camera's not
     assert [r for r in gcs.since(mark) if r.type == "HEARTBEAT" and r.src == AUTOPILOT]
     assert not [r for r in gcs.since(mark) if r.src == CAMERA]
+
+
+def test_gcsd_status_counts_the_photos(daemon, client):
+    d = daemon({"vehicle": {"camera": True},
+                "channels": [{"name": "gcs", "type": "udp-server", "address": "127.0.0.1:0"}]})
+    gcs = client(f"udpout:127.0.0.1:{d.port('gcs')}", *QGC)
+    gcs.heartbeat()
+    assert wait_for(gcs, lambda r: r.type == "HEARTBEAT" and r.src == CAMERA)
+    assert d.status()["counters"]["camera_photos"] == 0
+    for n in (1, 2):
+        mark = gcs.mark()
+        assert command(gcs, M.MAV_CMD_IMAGE_START_CAPTURE, 0, 0, 1, target=CAMERA) == M.MAV_RESULT_ACCEPTED
+        assert wait_for(gcs, lambda r, n=n: r.type == "CAMERA_IMAGE_CAPTURED" and r.msg.image_index == n, since=mark)
+    counters = d.status()["counters"]
+    assert (counters["camera_photos"], counters["camera_photo_failures"]) == (2, 0)

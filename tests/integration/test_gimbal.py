@@ -199,3 +199,28 @@ def test_attitude_status_is_in_the_extra3_stream_without_asking(gimbal):
     attitudes = [r for r in seen if r.type == "GIMBAL_DEVICE_ATTITUDE_STATUS" and r.src == (1, 1)]
     winds = [r for r in seen if r.type == "WIND" and r.src == (1, 1)]  # another EXTRA3 message: the control
     assert len(winds) >= 3 and len(attitudes) >= 3, (len(winds), len(attitudes))
+
+
+def test_roi_sysid_points_at_the_other_systems_reported_position(gimbal, client):
+    """DO_SET_ROI_SYSID 7: the gimbal points at wherever system 7's GLOBAL_POSITION_INT says it is (read
+    from any link, as ArduPilot's mount), and follows it when it moves."""
+    gcs = gimbal
+    from gcsd.sim.geo import offset
+    assert command(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL, DEVICE_STATUS, 100_000) == M.MAV_RESULT_ACCEPTED
+    assert command(gcs, M.MAV_CMD_DO_SET_ROI_SYSID, 7) == M.MAV_RESULT_ACCEPTED
+    host, port = gcs.conn.destination_addr
+    other = client(f"udpout:{host}:{port}", 7, 1)  # another vehicle on the same link
+    other.heartbeat(M.MAV_TYPE_QUADROTOR)
+
+    def report(north_m: float, east_m: float, alt_m: float) -> None:
+        lat, lon = offset(-35.363262, 149.165237, north_m, east_m)
+        other.send(M.MAVLink_global_position_int_message(0, round(lat * 1e7), round(lon * 1e7),
+                                                         round((584.0 + alt_m) * 1000), round(alt_m * 1000),
+                                                         0, 0, 0, 0))
+
+    report(0.0, 50.0, 50.0)  # 50 m east, 50 m up: pitch +45 is beyond MNT1_PITCH_MAX (20): held at 20
+    hit, last = settled(gcs, 20.0, 90.0)
+    assert hit is not None, f"not pointing east and up: {last}"
+    report(-50.0, 0.0, 0.0)  # it moves: 50 m south, on the ground
+    hit, last = settled(gcs, 0.0, 180.0)
+    assert hit is not None, f"did not follow system 7 south: {last}"
