@@ -30,7 +30,7 @@ from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync, MissionRawError
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.mission.items import MissionItem
-from integration.helpers import Client, udp_url
+from integration.helpers import Client, udp_channel, udp_url
 from integration.mission_client import LossyProxy, MissionClient
 
 from .conftest import DEFAULT_HOME
@@ -145,3 +145,27 @@ def _wp_list(process, deadline_s: float) -> int | None:
             return repeats
         return None
     return None
+
+
+@pytest.mark.interop
+async def test_the_extra_copies_stay_within_the_links_byte_budget(daemon):
+    """On a link with a byte budget (`bandwidth`, as a radio has) the copies, the items pushed
+    ahead and pushed again are sent only while the budget has room: the download still succeeds
+    and not one of them made the link drop a frame (an unchecked window of 8 items per request
+    would overrun 20 000 B/s several times over)."""
+    d = daemon({"channels": [udp_channel("gcs", bandwidth=20000)]})
+    sent = plan()
+    upload(d.port("gcs"), sent)
+    proxy = LossyProxy(d.port("gcs"), loss=LOSS, seed=1315)
+    try:
+        async with ground_station(proxy.port) as system:
+            mission = MissionRawAsync(system)
+            try:
+                got = await mission.download_mission()
+            finally:
+                mission.destroy()
+    finally:
+        proxy.close()
+    assert [(i.x, i.y) for i in got] == [(i.x, i.y) for i in sent]
+    stats = d.stats("gcs")
+    assert stats["drops"] == 0 and stats["replies_dropped"] == 0 and stats["packets_out"] > 2 * ITEMS, stats

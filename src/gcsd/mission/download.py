@@ -19,8 +19,9 @@ peer, is at least LOSSY over at least MIN_FRAMES frames) it makes its answers li
   (MAVSDK restarts its timeout on every item it receives, so it does not spend its retries
   meanwhile). Its MISSION_ACK, a new REQUEST_LIST or MAX_REPUSH silent rounds end it.
 
-Every copy beyond the first answer is optional: the adapter sends it only while the link's byte
-budget has room, so a slow radio is never flooded by them. Ground stations drop duplicates.
+Every copy beyond the first answer is optional: the adapter sends it only when it would go out at
+once (no reply queued, room in the link's byte budget), so a slow radio is never flooded by them
+and they never push an owed reply out of the queue. Ground stations drop duplicates.
 Bounded: MAX_REQUESTERS downloads followed (the least recent forgotten), WINDOW items per answer.
 Pure: `now` in, what to send out; the transfer machine (transfer.py) turns seqs into messages.
 """

@@ -52,8 +52,8 @@ the second copy is what lets it finish; clients ignore the duplicate). The GCS's
 MISSION_ACK of a download needs no answer. This bookkeeping is kept for 8 ground stations.
 *On a lossy link (`lossy(origin)`, measured from sequence gaps) the count and each answer go more
 than once, the items after the one asked for go right behind it, and a silent requester gets
-them again (download.py); those extra copies are `Send(optional=True)`: sent only with room in
-the link's byte budget.
+them again (download.py); those extra copies are `Send(optional=True)`: sent only when a reply
+would go out at once (none queued, room in the link's byte budget).
 """
 
 from __future__ import annotations

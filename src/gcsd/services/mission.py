@@ -294,7 +294,7 @@ class MissionService(Service):
         ctx = self.ctx
         for out in outputs:
             if isinstance(out, Send):
-                if not out.optional or out.channel.has_room():
+                if not out.optional or out.channel.reply_goes_now():
                     ctx.reply(out.channel, out.msg)
             elif isinstance(out, Text):
                 ctx.text(out.severity, out.text, None if out.channel is None else {out.channel.index})
