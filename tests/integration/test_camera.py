@@ -206,3 +206,19 @@ def test_gcsd_status_counts_the_photos(daemon, client):
         assert wait_for(gcs, lambda r, n=n: r.type == "CAMERA_IMAGE_CAPTURED" and r.msg.image_index == n, since=mark)
     counters = d.status()["counters"]
     assert (counters["camera_photos"], counters["camera_photo_failures"]) == (2, 0)
+
+
+def test_a_swarm_has_one_camera_per_vehicle(daemon, client, tmp_path):
+    d = daemon({"vehicle": {"camera": True, "count": 2},
+                "channels": [{"name": "gcs", "type": "udp-server", "address": "127.0.0.1:0"}]})
+    gcs = client(f"udpout:127.0.0.1:{d.port('gcs')}", *QGC)
+    gcs.heartbeat()
+    for sysid in (1, 2):
+        hb = wait_for(gcs, lambda r, s=sysid: r.type == "HEARTBEAT" and r.src == (s, 100))
+        assert hb is not None and hb.msg.type == M.MAV_TYPE_CAMERA
+    mark = gcs.mark()
+    assert command(gcs, M.MAV_CMD_IMAGE_START_CAPTURE, 0, 0, 1, target=(2, 100)) == M.MAV_RESULT_ACCEPTED
+    captured = wait_for(gcs, lambda r: r.type == "CAMERA_IMAGE_CAPTURED", since=mark)
+    assert captured is not None and captured.src == (2, 100)
+    assert (tmp_path / "state" / "vehicle-2" / "ftp" / "DCIM" / "100GCSD" / "IMG_00001.JPG").is_file()
+    assert not (tmp_path / "state" / "vehicle-1" / "ftp" / "DCIM" / "100GCSD" / "IMG_00001.JPG").exists()
