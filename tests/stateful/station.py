@@ -105,6 +105,17 @@ class Station:
             out += [m for m in self.rx.parse_buffer(data) or [] if m.get_type() != "BAD_DATA"]
         return out
 
+    def peer_closed(self) -> bool:
+        """TCP: the daemon has closed this connection (end of stream waiting to be read)."""
+        if self.closed or self.kind != "tcp":
+            return self.closed
+        try:
+            ready, _, _ = select.select([self.sock], [], [], 0)
+            self.closed = bool(ready) and self.sock.recv(1, socket.MSG_PEEK) == b""
+        except OSError:
+            self.closed = True
+        return self.closed
+
     def request(self, msg, match: Callable, timeout: float = 3.0, resend_s: float = 1.0):
         """Send `msg` and wait for a reply that `match`es, sending again every `resend_s`."""
         end = time.monotonic() + timeout
