@@ -43,7 +43,8 @@ def _start(tmp: Path) -> tuple[subprocess.Popen, int]:
     config = tmp / "gcsd.yaml"
     config.write_text(f"state_dir: {tmp / 'state'}\nlog: {{level: info, format: json}}\n"
                       "channels:\n  - {name: gcs, type: udp-server, address: '127.0.0.1:0'}\n"
-                      f"can:\n  buses:\n    - {{interface: virtual, channel: bench-{os.getpid()}, nodes: [gps, battery]}}\n")
+                      "can:\n  buses:\n"
+                      f"    - {{interface: virtual, channel: bench-{os.getpid()}, nodes: [gps, battery]}}\n")
     log = tmp / "gcsd.log"
     proc = subprocess.Popen([sys.executable, "-m", "gcsd", "run", "-c", str(config)], stdout=log.open("wb"),
                             stderr=subprocess.STDOUT)

@@ -38,7 +38,8 @@ def camera(daemon, client, tmp_path):
 def command(gcs, cmd: int, *params: float, target=AUTOPILOT, timeout: float = 3.0):
     mark = gcs.mark()
     gcs.command_long(cmd, *params, target=target)
-    r = wait_for(gcs, lambda r: r.type == "COMMAND_ACK" and r.msg.command == cmd and r.src == target, timeout, since=mark)
+    r = wait_for(gcs, lambda r: r.type == "COMMAND_ACK" and r.msg.command == cmd and r.src == target, timeout,
+                 since=mark)
     return None if r is None else r.msg.result
 
 
@@ -146,7 +147,8 @@ def test_mission_trigger_distance_leaves_photos_along_the_route(camera):
         assert -1 <= north <= 101 and distance_m(lat, HOME[1], lat, lon) < 3, (lat, lon)
         assert abs(alt - (HOME[2] + 20)) < 2, alt
     steps = [distance_m(a[0], a[1], b[0], b[1]) for a, b in itertools.pairwise(spots)]
-    assert all(19 <= s <= 26 for s in steps), steps  # every 20 m
+    # every 20 m (a late send pass adds what the vehicle flew meanwhile)
+    assert all(19 <= s <= 30 for s in steps), steps
 
 
 def test_camera_commands_answer_from_the_right_component(camera):

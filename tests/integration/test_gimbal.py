@@ -185,7 +185,8 @@ def test_roi_location_keeps_the_gimbal_on_target_while_the_vehicle_flies(gimbal)
     from gcsd.sim import geo
     travelled = geo.distance_m(climbed.msg.lat / 1e7, climbed.msg.lon / 1e7, pos.msg.lat / 1e7, pos.msg.lon / 1e7)
     assert travelled > 20, f"the vehicle did not fly ({travelled:.1f} m)"
-    assert max(errors) < 8.0, f"the gimbal lost the target: {max(errors):.1f} deg"
+    # 5.9 deg measured: a 60 deg/s slew lags the vehicle turning towards its new course
+    assert max(errors) < 10.0, f"the gimbal lost the target: {max(errors):.1f} deg"
 
 
 def test_attitude_status_is_in_the_extra3_stream_without_asking(gimbal):

@@ -81,7 +81,8 @@ async def test_mavsdk_gimbal_takes_control_sets_angles_and_the_attitude_follows(
             assert (status.sysid_primary_control, status.compid_primary_control) == (245, 190)  # MAVSDK's own ids
             # before: the default mode's attitude (RC targeting, centred inputs: the middle of -90..20)
             before = await _first(gimbal.subscribe_attitude(),
-                                  lambda a: abs(a.euler_angle_forward.pitch_deg + 35) < 0.5, WAIT_S, "the default attitude")
+                                  lambda a: abs(a.euler_angle_forward.pitch_deg + 35) < 0.5, WAIT_S,
+                                  "the default attitude")
             assert abs(before.euler_angle_forward.yaw_deg) < 0.5
             await gimbal.set_angles(gimbal_id, 0.0, -50.0, 30.0, GimbalMode.YAW_FOLLOW, SendMode.ONCE)
             there = await _first(gimbal.subscribe_attitude(),

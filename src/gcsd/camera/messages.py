@@ -33,7 +33,8 @@ def _e7(deg: float) -> int:
 
 def information(time_ms: int, gimbal_device_id: int):
     return M.MAVLink_camera_information_message(
-        time_ms, list(VENDOR.ljust(32, b"\0")), list(MODEL.ljust(32, b"\0")), FIRMWARE_VERSION, FOCAL_LENGTH_MM[0], SENSOR_MM[0], SENSOR_MM[1], *RESOLUTION, 0,
+        time_ms, list(VENDOR.ljust(32, b"\0")), list(MODEL.ljust(32, b"\0")), FIRMWARE_VERSION,
+        FOCAL_LENGTH_MM[0], SENSOR_MM[0], SENSOR_MM[1], *RESOLUTION, 0,
         CAPABILITIES, 0, b"", gimbal_device_id, 0)
 
 

@@ -49,8 +49,9 @@ class CanService(Service):
         self._closed = False
 
     def counters(self) -> dict[str, int]:
-        out = {"can_inbound_refused": self.forwarder.refused_inbound, "can_inbound_dropped": self.forwarder.dropped_inbound,
-               "can_forwarded": self.forwarder.forwarded, "can_outbox_dropped": self.outbox_dropped}
+        fw = self.forwarder
+        out = {"can_inbound_refused": fw.refused_inbound, "can_inbound_dropped": fw.dropped_inbound,
+               "can_forwarded": fw.forwarded, "can_outbox_dropped": self.outbox_dropped}
         for bus in self.buses:
             out[f"can{bus.index}_frames_in"] = bus.frames_in
             out[f"can{bus.index}_frames_out"] = bus.frames_out
