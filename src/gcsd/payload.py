@@ -3,7 +3,8 @@
 - `payload_params(defs, config)`: the parameter definitions with the MNT1_ group when
   `vehicle.gimbal` is on (before the store is built, so a saved MNT1_ value loads).
 - `gimbal_service(node, w)`: with `vehicle.gimbal`, the gimbal manager on the autopilot
-  component; it takes the autopilot's ROI (`Autopilot.mount_roi`), and its producers join the
+  component; it takes the autopilot's ROI (`Autopilot.mount_roi`; not an antenna tracker's, which
+  points itself at it), and its producers join the
   vehicle's table (GIMBAL_MANAGER_*, GIMBAL_DEVICE_ATTITUDE_STATUS).
 - `camera_service(node, w)`: with `vehicle.camera`, the camera component (compid 100) on the
   gimbal when there is one; the autopilot's camera commands; the mission's camera items
@@ -16,6 +17,7 @@ device" answers (services/peripherals.py), and compose.OVERRIDES says who wins w
 
 from __future__ import annotations
 
+from .autopilot.settings import Behaviour
 from .camera.service import CameraService
 from .gimbal.params import with_mount_params
 from .gimbal.service import GimbalService
@@ -33,7 +35,8 @@ def gimbal_service(node, w):
         return None
     now = node.now()
     service = GimbalService(node, now)
-    node.autopilot.mount_roi = service.roi
+    if Behaviour.TRACK not in set(node.vehicle.behaviours.values()):  # an antenna tracker points itself at the ROI
+        node.autopilot.mount_roi = service.roi
     node.producers.update(gimbal_producers(service))
     for link in node.links:  # the streams were set before this producer existed: EXTRA3 again, with it
         link.set_stream_rate(EXTRA3, link.stream_rates[EXTRA3], now)
