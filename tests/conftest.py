@@ -105,3 +105,10 @@ def daemon(tmp_path: Path):
     yield start
     for d in started:
         d.stop()
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """The tests marked slow or fault (a minute or more each, some of them) run first: under
+    pytest-xdist (README's command) they then start at once on different workers, and the many
+    short tests fill in around them instead of one long test starting last and running alone."""
+    items.sort(key=lambda item: 0 if item.get_closest_marker("slow") or item.get_closest_marker("fault") else 1)
