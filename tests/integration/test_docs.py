@@ -22,6 +22,7 @@ mentions must exist; nothing points into ../shared).
 from __future__ import annotations
 
 import asyncio
+import fcntl
 import os
 import re
 import select
@@ -31,6 +32,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from dataclasses import dataclass
@@ -51,9 +53,29 @@ PROGRAMS = ("gcsd", "mavproxy.py", "python", "python3", "pip", "systemctl", "jou
 # not run: files checked (kill: the unit's ExecReload, SIGHUP to the daemon; tests/integration/test_companion_live.py)
 ADMIN = ("pip", "systemctl", "journalctl", "useradd", "install", "ln", "apt-get", "kill")
 API_PORT = 14551  # the default configuration's udp-server (README "Connect a ground station")
-# the documented ports are fixed: under pytest-xdist (README's command) this file runs on one worker
-pytestmark = pytest.mark.xdist_group("documented_ports")
 START_TIMEOUT_S = 15.0
+PORTS_LOCK = Path(tempfile.gettempdir()) / "gcsd-tests-documented-ports.lock"
+PORTS_LOCK_WAIT_S = 180.0
+
+
+@pytest.fixture(autouse=True)
+def documented_ports():
+    """The documented ports (UDP 14551, the broadcast to 14550) are fixed: one test at a time uses
+    them, across pytest-xdist workers (README's command) and across test runs on this machine."""
+    with PORTS_LOCK.open("a") as lock:
+        end = time.monotonic() + PORTS_LOCK_WAIT_S
+        while True:
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() > end:
+                    pytest.fail(f"{PORTS_LOCK} held for {PORTS_LOCK_WAIT_S} s by another test run")
+                time.sleep(0.1)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 @dataclass(frozen=True)
