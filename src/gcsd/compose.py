@@ -31,8 +31,9 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from . import payload, telemetry
 from .autopilot.core import Autopilot
 from .channel import Channel
-from .config import ChannelConfig, Config
+from .config import MAX_CHANNELS, ChannelConfig, Config
 from .config_mqtt import route_capacity
+from .config_schema import LOCAL_TYPE, mavlink_slot
 from .http import wiring as http_wiring
 from .logs.wiring import flight_log_service, log_dir
 from .node import VehicleNode
@@ -221,7 +222,7 @@ def build_vehicle(index: int, config: Config, clock, channels: list[Channel], wa
     now = clock.now()
     store = ParamStore(payload.payload_params(vehicle_params(  # ArduPilot's set for the vehicle type
         vtype, vcfg.sysid + index, config.gcs.sysid, config.gcs.enforce_sysid,  # (gcsd.params.defs)
-        [dict(ch.config.streams) for ch in channels], vcfg.speedup,
+        [dict(ch.config.streams) for ch in channels if ch.config.type != LOCAL_TYPE], vcfg.speedup,
     ), config))
     param_service = ParamService(None, store, state_dir / "mav.parm", now)
     param_service.load(config.params_file)
@@ -272,14 +273,19 @@ def _wire_params(node: VehicleNode, config: Config, clock) -> None:
     """Parameters that act at once; the rest are read where they are used."""
     params = node.params
     for link in node.links:
+        slot = mavlink_slot([ch.config.type for ch in node.channels], link.channel.index)
         for stream in STREAM_NAMES:
-            name = f"SR{link.channel.index}_{PARAM_SUFFIX[stream]}"
-            if name not in params:  # a stream the vehicle type has no SRn_ parameter for
+            name = None if slot is None else f"SR{slot}_{PARAM_SUFFIX[stream]}"
+            if name not in params:  # the HTTP API's channel, or a stream the type has no SRn_ for
                 link.set_stream_rate(stream, link.channel.config.streams[stream], clock.now())
                 continue
             link.set_stream_rate(stream, params.clamped(name), clock.now())  # beyond its range: the bound
-            params.on_change(name, lambda n, _v, i=link.channel.index, stream=stream:
-                             node.links[i].set_stream_rate(stream, params.clamped(n), clock.now()))
+    for slot in range(MAX_CHANNELS):  # also the slots of channels added at run time (node.attach_link)
+        for stream in STREAM_NAMES:
+            name = f"SR{slot}_{PARAM_SUFFIX[stream]}"
+            if name in params:
+                params.on_change(name, lambda n, _v, slot=slot, stream=stream:
+                                 node.set_slot_rate(slot, stream, params.clamped(n), clock.now()))
     node.gcs_sysid = int(params.get("SYSID_MYGCS")) if "SYSID_MYGCS" in params else config.gcs.sysid
     node.enforce_gcs_sysid = (bool(params.get("SYSID_ENFORCE")) if "SYSID_ENFORCE" in params
                               else config.gcs.enforce_sysid)

@@ -9,7 +9,7 @@ holds all ten streams (the given rates merged over DEFAULT_STREAM_RATES_HZ).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -32,7 +32,8 @@ LOG_FORMATS = ("console", "json")
 
 DEFAULT_FTP_MAX_FILE_BYTES = 64 * 1024 * 1024
 MAX_FTP_FILE_BYTES = 0xFFFFFFFF  # FTP offsets are u32
-MAX_CHANNELS = 10  # the SRn_* parameters have one digit, n = 0..9
+MAX_CHANNELS = 10  # MAVLink channel slots: the SRn_* parameters have one digit, n = 0..9
+LOCAL_TYPE = "local"  # the HTTP API's own channel (gcsd.http.local): built, never configured
 MAX_STREAM_RATE_HZ = 50
 MAX_SPEEDUP = 1000
 COMPANION_COMPID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
@@ -46,6 +47,17 @@ SERVER_TYPES = ("udp-server", "tcp-server")  # bind an address; one that is take
 NETWORK_TYPES = ("udp-server", "udp-client", "tcp-server", "tcp-client")  # have an address
 DATAGRAM_TYPES = frozenset({"udp-server", "udp-client", "mqtt"})  # one frame per datagram, no flow control
 SERIAL_CONTROL_PORTS = ("telem1", "telem2", "gps1", "gps2", *(f"serial{n}" for n in range(10)))
+
+
+def mavlink_slot(types: Sequence[str], index: int) -> int | None:
+    """The n of the SRn_* parameters of the daemon's channel `index` (`types`: every channel's
+    type, in the daemon's order): its place among the MAVLink channels, so that SR0_ .. SR9_ are
+    the configured and run-time channels whatever the position of the HTTP API's channel. That
+    channel (type local) has none: it is no MAVLink link a ground station sets rates on, and its
+    rates are the fixed defaults (DEFAULT_STREAM_RATES_HZ)."""
+    if types[index] == LOCAL_TYPE:
+        return None
+    return sum(1 for t in types[:index] if t != LOCAL_TYPE)
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,7 @@ from .channel import Channel, Peer
 from .clock import Clock
 from .codec import Frame
 from .config import MAX_CHANNELS, Config
-from .config_schema import ChannelConfig
+from .config_schema import LOCAL_TYPE, ChannelConfig
 from .dedup import LOOP_WINDOW_S, RecentFrames
 from .livechannels import LiveChannels, load_specs
 from .msgids import HEARTBEAT as MSG_ID_HEARTBEAT
@@ -97,7 +97,8 @@ class GCS:
             return prefer
         if retired:
             return retired[0]
-        return len(self.channels) if len(self.channels) < MAX_CHANNELS else None
+        mavlink = sum(1 for ch in self.channels if ch.config.type != LOCAL_TYPE)  # the HTTP API's takes no slot
+        return len(self.channels) if mavlink < MAX_CHANNELS else None
 
     def attach(self, index: int, config: ChannelConfig) -> Channel:
         """A new channel in slot `index`: wired, known to the router and to every vehicle."""

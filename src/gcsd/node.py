@@ -28,6 +28,7 @@ from .boundary import ErrorCounts
 from .channel import Channel
 from .clock import Clock
 from .codec import MAX_FRAME_BYTES, Frame
+from .config_schema import mavlink_slot
 from .link import Link
 from .msgids import is_radio
 from .params import ParamStore
@@ -179,17 +180,25 @@ class VehicleNode:
         return msgid in self.producers and self.vehicle.produces(msgid)
 
     def attach_link(self, channel: Channel, now: float) -> None:
-        """A channel opened at run time (livechannels.py): a link in its slot, at its SRn_ rates
-        when the slot has them, else at its configured rates."""
+        """A channel opened at run time (livechannels.py): a link in its place, at the SRn_ rates
+        of its MAVLink slot n when the vehicle has them, else at its configured rates."""
         link = Link(channel, now, self.producible, lambda ch=channel: self._wake(ch))
+        slot = mavlink_slot([ch.config.type for ch in self.channels], channel.index)
         for stream in STREAM_NAMES:
-            name = f"SR{channel.index}_{PARAM_SUFFIX[stream]}"
+            name = f"SR{slot}_{PARAM_SUFFIX[stream]}"
             if name in self.params:
-                link.set_stream_rate(stream, self.params.get(name), now)
+                link.set_stream_rate(stream, self.params.clamped(name), now)
         if channel.index == len(self.links):
             self.links.append(link)
         else:
             self.links[channel.index] = link
+
+    def set_slot_rate(self, slot: int, stream: str, rate_hz: float, now: float) -> None:
+        """An SRn_ parameter changed: the rate of the channel in MAVLink slot n, if one is open."""
+        types = [ch.config.type for ch in self.channels]
+        for link in self.links:
+            if not link.channel.retired and mavlink_slot(types, link.channel.index) == slot:
+                link.set_stream_rate(stream, rate_hz, now)
 
     def counters(self) -> dict[str, int]:
         """This vehicle's counted events for `gcsd status` (its services' and the text queue's)."""

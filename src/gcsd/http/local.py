@@ -1,9 +1,12 @@
 """The HTTP API as a MAVLink channel of the daemon (type `local`, named `http`).
 
 Built by the composition root after the configured channels (gcsd.http.wiring), so
-every vehicle has a Link on it at the default stream rates (its SRn_ group) and answers on it
-like on any other channel: the message tree then holds our own vehicles' telemetry whether or
-not any ground station is connected, and the replies to what was sent over HTTP.
+every vehicle has a Link on it and answers on it like on any other channel: the message tree
+then holds our own vehicles' telemetry whether or not any ground station is connected, and the
+replies to what was sent over HTTP. It is no MAVLink channel a ground station sets rates on:
+its streams run at the fixed defaults (DEFAULT_STREAM_RATES_HZ), it has no SRn_ parameters and
+takes none of the MAX_CHANNELS MAVLink slots (config_schema.mavlink_slot), so the parameter set
+is ArduPilot's with or without the API, and READY counts only the MAVLink channels.
 
 - Out (our vehicles' messages): `send_message` hands the pymavlink message to `sink(sysid,
   compid, seq, msg)` without encoding it; nothing else carries it into the tree, so each is
@@ -33,8 +36,8 @@ from collections.abc import Awaitable, Callable
 from ..channel import Channel
 from ..codec import Encoder, MAVLink_message
 from ..config import ChannelConfig
+from ..config_schema import LOCAL_TYPE
 
-LOCAL_TYPE = "local"
 PEER_KEY = "http-api"
 
 
