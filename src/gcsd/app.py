@@ -25,6 +25,7 @@ import structlog
 
 from . import control, preflight, statelock, tcpserver
 from .config import Config, ConfigError, load_config
+from .config_schema import LOCAL_TYPE
 from .gcs import GCS
 from .notify import Notifier
 from .transport import ChannelStartError
@@ -117,6 +118,19 @@ def _reloaded(task: asyncio.Task) -> None:
         log.error("reload_failed", error=repr(task.exception()))
 
 
+def ready_status(gcs: GCS) -> str:
+    """systemd's status line at READY: the MAVLink channels open (the HTTP API's own channel is
+    none of them, config_schema.mavlink_slot) and where the API listens, or why it does not."""
+    mavlink = [ch for ch in gcs.channels if ch.config.type != LOCAL_TYPE]
+    text = f"{sum(1 for ch in mavlink if ch.index in gcs.opened)} of {len(mavlink)} channels open"
+    if gcs.http is None:
+        return text
+    http = gcs.http.state()
+    if http["listening"] is not None:
+        return f"{text}, HTTP API on {http['listening']}"
+    return f"{text}, HTTP API not listening on {http['address']} ({http['error']}; retrying)"
+
+
 async def _run_with_notify(gcs: GCS, stop: asyncio.Event, notifier: Notifier) -> None:
     """Run the GCS; tell systemd when it is ready (servers bound, clients tried), and ping its watchdog
     from the loop."""
@@ -124,8 +138,9 @@ async def _run_with_notify(gcs: GCS, stop: asyncio.Event, notifier: Notifier) ->
     async def tell_systemd() -> None:
         await gcs.ready.wait()
         registration.append(control.register(gcs.config))
-        notifier.ready(f"{len(gcs.opened)} of {len(gcs.channels)} channels open")
-        log.info("daemon_ready", channels=len(gcs.channels), notify=notifier.enabled)
+        status = ready_status(gcs)
+        notifier.ready(status)
+        log.info("daemon_ready", status=status, notify=notifier.enabled)
         interval = notifier.watchdog_interval_s
         while interval:
             notifier.watchdog()

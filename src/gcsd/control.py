@@ -263,6 +263,14 @@ def format_channels(status: dict) -> str:
                                "out (pkt)", "in (B)", "out (B)"], channels)
 
 
+def _http_line(http: dict | None) -> str:
+    if http is None:
+        return "HTTP API: off"
+    if http.get("listening"):
+        return f'HTTP API: listening on {http["listening"]}'
+    return f'HTTP API: not listening on {http.get("address")} ({http.get("error") or "starting"}; retrying)'
+
+
 def format_status(status: dict, daemon: dict | None = None) -> str:
     """The status document as titled tables; units in the headers (pkt/s, B, s)."""
     chans = status.get("channels", [])
@@ -284,6 +292,7 @@ def format_status(status: dict, daemon: dict | None = None) -> str:
         head += f' (pid {daemon.get("pid")}, config {daemon.get("config") or "built-in default"})'
     parts = [
         head,
+        _http_line(status.get("http")),
         "",
         format_channels(status),
         "",

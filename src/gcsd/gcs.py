@@ -397,7 +397,7 @@ class GCS:
         ]
         return {"version": __version__, "uptime_s": now - self.started_s, "channels": channels,
                 "routes": routes, "vehicles": vehicles, "errors": self.errors.snapshot(),
-                "counters": self.counters()}
+                "counters": self.counters(), "http": None if self.http is None else self.http.state()}
 
     def counters(self) -> dict[str, int]:
         """Counted events outside the channels: routing's, and every vehicle's summed."""

@@ -7,7 +7,8 @@ returns or until `wakeup` is set (something was queued). Receiving happens in pr
 callbacks, which hand bytes to `Channel.receive`.
 
 Errors are events, never crashes: a refused connection, a vanished serial device or a full
-socket buffer is logged and counted; the channel reconnects, and the daemon keeps running.
+socket buffer is logged (an open failing again with the same error: at debug level) and counted
+(`open_failures`); the channel reconnects, and the daemon keeps running.
 
 - udp-server: one bound socket; an address that sends a good frame becomes a peer (see
   channel.py, "Admission"), answered until silent 30 s.
@@ -291,6 +292,7 @@ async def run_channel(
     backoff = BACKOFF_START_S
     clock = channel.clock
     ever_opened = False
+    last_error: str | None = None  # of the last failed open, while it keeps failing
     hunt = BaudHunt(channel.config.bauds) if channel.config.type == "serial" else None
     while True:
         baud = hunt.opening(clock()) if hunt is not None else None
@@ -302,7 +304,11 @@ async def run_channel(
                 host, port = channel.config.address
                 raise ChannelStartError(
                     f"channel {channel.name}: cannot open {channel.config.type} {host}:{port}: {error}") from None
-            log.warning("channel_open_failed", channel=channel.name, error=error, retry_s=backoff)
+            # once per distinct error: a peer down for hours, or a port another process holds,
+            # is one warning (then debug), not one every BACKOFF_MAX_S; open_failures counts all
+            (log.debug if error == last_error else log.warning)(
+                "channel_open_failed", channel=channel.name, error=error, retry_s=backoff)
+            last_error = error
             channel.stats.open_failures += 1
             opened(channel, False)
             await asyncio.sleep(backoff)
@@ -310,6 +316,7 @@ async def run_channel(
             continue
         ever_opened = True
         backoff = BACKOFF_START_S
+        last_error = None
         log.info("channel_opened", channel=channel.name, type=channel.config.type, address=_describe(channel),
                  baud=baud)
         opened(channel, True)

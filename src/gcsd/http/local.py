@@ -23,9 +23,10 @@ is ArduPilot's with or without the API, and READY counts only the MAVLink channe
   timestamp), as for any trusted local tool (SPEC.md "Signing gateway").
 - Opening it is opening the API (`open`, through `opener`, set by gcsd.http.service): the
   channel task of `transport.run_channel` binds `http.address`, then runs the send passes as for
-  every channel, so the daemon is ready once the API listens. A port that cannot be bound is
-  what a client channel that cannot connect is: logged (`channel_open_failed`) and tried again
-  with the transport's backoff; the daemon keeps flying without its HTTP face meanwhile.
+  every channel. A port that cannot be bound is what a client channel that cannot connect is:
+  logged (`channel_open_failed`, once per distinct error) and tried again with the transport's
+  backoff; the daemon keeps flying without its HTTP face meanwhile, READY is not held for it, and
+  `gcsd status` says why it is not listening (gcsd.http.service).
 """
 
 from __future__ import annotations

@@ -7,6 +7,11 @@ time). `open()` is what opening the `http` channel does
 `http_listening` with the bound address (port 0 picks one; it is the `http` channel's address
 in `gcsd status` and `http_address` in /v1/status), and hand back the channel's closer, which
 stops listening and closes every connection within SHUTDOWN_TIMEOUT_S.
+
+A port another process holds (a second gcsd on the host: a swarm, a fleet instance, a parallel
+test) costs only the API: the transport tries again with its backoff (logged once per distinct
+error), `state()` says why it is not listening (`gcsd status`, systemd's READY status line), and
+neither READY nor the MAVLink channels wait for it.
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ class HttpService:
     def __init__(self, config: Config, channel: LocalChannel, gcs) -> None:
         self.config = config
         self.address: tuple[str, int] | None = None  # bound, once listening
+        self.listen_error: str | None = None  # why the last attempt to listen failed, until one succeeds
         self._runner: web.AppRunner | None = None
         self._closing: set[asyncio.Future] = set()
         self._gcs_status = gcs.status
@@ -60,6 +66,14 @@ class HttpService:
             entry["peer_addresses"] = peers.get(entry["name"], [])
         return document
 
+    def state(self) -> dict:
+        """The listener for `gcsd status`: the configured address, the bound one (None while not
+        listening) and the last error while not listening."""
+        host, port = self.config.http.address
+        return {"address": f"{host}:{port}",
+                "listening": None if self.address is None else f"{self.address[0]}:{self.address[1]}",
+                "error": None if self.address is not None else self.listen_error}
+
     def tap(self, channel, frame, now: float) -> None:
         """The daemon's tap (compose.py): every accepted frame, before routing. The tree's own
         guard: a fault here is counted and never costs the frame its routing."""
@@ -79,10 +93,12 @@ class HttpService:
         host, port = http.address
         try:
             await web.TCPSite(runner, host, port).start()
-        except OSError:
+        except OSError as exc:
+            self.listen_error = exc.strerror or str(exc)
             self._runner = None
             await runner.cleanup()
             raise
+        self.listen_error = None
         self.address = tuple(runner.addresses[0][:2]) if runner.addresses else (host, port)
         self.face.channel.local_address = self.address
         log.info("http_listening", address=f"{self.address[0]}:{self.address[1]}",
