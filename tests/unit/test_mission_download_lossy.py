@@ -21,7 +21,7 @@ from gcsd.mission.download import (
     DownloadAssist,
     is_lossy,
 )
-from gcsd.mission.transfer import Send
+from gcsd.mission.effects import Send
 
 GCS = Origin(255, 190, "gcs")
 N = 40

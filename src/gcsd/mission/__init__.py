@@ -1,10 +1,12 @@
-"""Missions, fence and rally: one transfer machine (`transfer`), three stores (`stores`), the
-item form they share (`items`) and the QGC WPL 110 files they persist as (`wpl`). The service
-that connects them to a vehicle node is `gcsd.services.mission`."""
+"""Missions, fence and rally: one transfer machine (`transfer`: uploads; `download`: the answers
+to downloads), what it takes and gives back (`effects`), three stores (`stores`), the item form
+they share (`items`) and the QGC WPL 110 files they persist as (`wpl`). The service that
+connects them to a vehicle node is `gcsd.services.mission`."""
 
+from .effects import Origin, PlanChanged, Send, Text
 from .items import MissionItem
 from .stores import FenceStore, MissionStore, PlanStore, RallyStore
-from .transfer import MissionTransfer, Origin, PlanChanged, Send, Text
+from .transfer import MissionTransfer
 
 __all__ = [
     "FenceStore", "MissionItem", "MissionStore", "MissionTransfer", "Origin", "PlanChanged", "PlanStore",

@@ -1,8 +1,8 @@
 """The mission-item transfer machine: one per mission type, pure, time passed in as `now`.
 
 It takes decoded requests from an `Origin` (sysid, compid, the opaque channel they came on, and
-whether that link speaks MAVLink1) and returns what to do: `Send(channel, msg)`, `Text(...)`
-and `PlanChanged` when the store's plan was replaced. `tick(now)` runs the timers and
+whether that link speaks MAVLink1) and returns what to do (effects.py): `Send(channel, msg)`,
+`Text(...)` and `PlanChanged` when the store's plan was replaced. `tick(now)` runs the timers and
 `next_deadline()` says when it next needs to. It never touches a socket or a clock; the plan
 is written by the saver its owner injects (MissionService), before the ACK is sent.
 
@@ -42,18 +42,9 @@ fails their whole upload (MAVSDK gives up 2.5 s later): measured, one MAVSDK upl
 through 20 % loss failed that way with one copy. QGroundControl stops listening once it has
 its ACK; MAVSDK's finished transfer ignores the copy.
 
-Downloads keep no state, as in ArduPilot: REQUEST_LIST -> MISSION_COUNT (DENIED while
-receiving); REQUEST_INT -> MISSION_ITEM_INT (DENIED while receiving; out of range ->
-MISSION_COUNT then INVALID_SEQUENCE); legacy REQUEST -> MISSION_ITEM with a once-per-list
-warning. Requests may be pipelined and out of order; each is answered on its own. An item the
-same ground station asks for again since its REQUEST_LIST is sent twice* (the request proves a
-reply was lost: MAVSDK abandons a whole download after 5 tries of one item, so on a lossy link
-the second copy is what lets it finish; clients ignore the duplicate). The GCS's final
-MISSION_ACK of a download needs no answer. This bookkeeping is kept for 8 ground stations.
-*On a lossy link (`lossy(origin)`, measured from sequence gaps) the count and each answer go more
-than once, the items after the one asked for go right behind it, and a silent requester gets
-them again (download.py); those extra copies are `Send(optional=True)`: sent only when a reply
-would go out at once (none queued, room in the link's byte budget).
+Downloads are answered by `Downloads` (download.py: no transfer state, as in ArduPilot, with
+repeated requests and lossy links looked after there); this machine only refuses them while
+receiving: REQUEST_LIST and REQUEST_INT get DENIED then (a legacy REQUEST is still answered).
 """
 
 from __future__ import annotations
@@ -64,55 +55,16 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..rtt import INITIAL_RTO_S, RttEstimator, RttTable
-from .download import COUNT_COPIES, ITEM_COPIES, DownloadAssist
-from .items import MissionItem, item_float_message, item_int_message
+from .download import Downloads
+from .effects import Origin, Output, PlanChanged, Send, Text
+from .items import MissionItem
 from .stores import PlanStore
 
 RETRY_S = 1.0
 ABORT_S = 8.0
 ACCEPTED, ERROR, DENIED = M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_ERROR, M.MAV_MISSION_DENIED
-REPEAT_COPIES = 2  # an item asked for again is sent twice
 FINAL_ACK_COPIES = 2  # the ACK that ends an upload is sent twice
-MAX_REQUESTERS = 8  # download bookkeeping is kept for this many ground stations
 LEGACY_ITEM_TEXT = "got MISSION_ITEM; GCS should send MISSION_ITEM_INT"
-LEGACY_REQUEST_TEXT = "got MISSION_REQUEST; use MISSION_REQUEST_INT!"
-
-
-@dataclass(frozen=True, slots=True)
-class Origin:
-    """Who sent a request and where from; `channel` is opaque (replies go back through it)."""
-
-    sysid: int
-    compid: int
-    channel: Hashable
-    mavlink1: bool = False
-
-    @property
-    def node(self) -> tuple[int, int]:
-        return self.sysid, self.compid
-
-
-@dataclass(frozen=True, slots=True)
-class Send:
-    channel: Hashable
-    msg: object
-    optional: bool = False  # a copy for a lossy link: only if the byte budget has room
-
-
-@dataclass(frozen=True, slots=True)
-class Text:
-    severity: int
-    text: str
-    channel: Hashable | None = None  # None: every ground station
-
-
-@dataclass(frozen=True, slots=True)
-class PlanChanged:
-    mission_type: int
-    count: int
-
-
-Output = Send | Text | PlanChanged
 
 
 @dataclass(slots=True)
@@ -148,8 +100,7 @@ class MissionTransfer:
         """`rtt`: the per-peer estimates, shared by the three types (a private table if None);
         `slowdown_s` / `queued_s`: a channel's radio slowdown and byte-budget backlog, seconds;
         `lossy`: whether the link a requester is on loses frames (download.py)."""
-        self.lossy = lossy
-        self.assist = DownloadAssist()
+        self.downloads = Downloads(store, lossy)
         self.store = store
         self.retry_s = retry_s
         self.abort_s = abort_s
@@ -159,8 +110,6 @@ class MissionTransfer:
         self.mission_type = store.mission_type
         self._upload: _Upload | None = None
         self._finished: _Finished | None = None
-        self._download_warned: set[tuple[int, int]] = set()
-        self._answered: dict[tuple[int, int], set[int]] = {}  # per requester, since its REQUEST_LIST
 
     # --- what the adapter may ask ------------------------------------------------------------
     @property
@@ -177,10 +126,10 @@ class MissionTransfer:
 
     def next_deadline(self) -> float | None:
         up = self._upload
-        assist = self.assist.next_deadline()
+        pushes = self.downloads.next_deadline()
         if up is None:
-            return assist
-        return min(up.deadline_s, up.last_item_s + self.abort_s, *([] if assist is None else [assist]))
+            return pushes
+        return min(up.deadline_s, up.last_item_s + self.abort_s, *([] if pushes is None else [pushes]))
 
     # --- upload ------------------------------------------------------------------------------
     def mission_count(self, origin: Origin, count: int, now: float) -> list[Output]:
@@ -246,68 +195,19 @@ class MissionTransfer:
         if self._upload is not None and self._upload.owner == origin.node:
             self._upload = None
         else:
-            self.assist.finish(origin.node)  # a download's end
+            self.downloads.finish(origin.node)  # a download's end
         return []
 
-    # --- download ----------------------------------------------------------------------------
+    # --- download (download.py) --------------------------------------------------------------
     def mission_request_list(self, origin: Origin, now: float) -> list[Output]:
         if self._upload is not None:
             return [self._ack(origin, DENIED)]
-        self._download_warned.discard(origin.node)
-        self._answered.pop(origin.node, None)
-        self.assist.finish(origin.node)
-        count = self._count(origin)
-        if not self.lossy(origin):
-            return [count]
-        return [count] + [Send(count.channel, count.msg, True)] * (COUNT_COPIES - 1)
+        return self.downloads.request_list(origin, now)
 
     def mission_request(self, origin: Origin, seq: int, legacy: bool, now: float) -> list[Output]:
         if self._upload is not None and not legacy:
             return [self._ack(origin, DENIED)]
-        item = self.store.item(seq)
-        if item is None:
-            return [self._count(origin), self._ack(origin, M.MAV_MISSION_INVALID_SEQUENCE)]
-        copies = REPEAT_COPIES if self._asked_before(origin.node, seq) else 1
-        out: list[Output] = []
-        if legacy and origin.node not in self._download_warned:
-            if len(self._download_warned) >= MAX_REQUESTERS:
-                self._download_warned.clear()
-            self._download_warned.add(origin.node)
-            out.append(Text(M.MAV_SEVERITY_WARNING, LEGACY_REQUEST_TEXT, origin.channel))
-        answer = self._item_message(seq, item, origin.node, legacy)
-        out += [Send(origin.channel, answer)] * copies
-        if self.lossy(origin):
-            out += [Send(origin.channel, answer, True)] * max(0, ITEM_COPIES - copies)
-            ahead = self.assist.requested(origin.node, origin.channel, seq, self.store.count(), legacy, now)
-            out += self._pushed(origin.channel, origin.node, legacy, ahead)
-        return out
-
-    def _item_message(self, seq: int, item: MissionItem, target: tuple[int, int], legacy: bool):
-        if legacy:
-            return item_float_message(item, seq, self.mission_type, target)
-        return item_int_message(item, seq, self.mission_type, target)
-
-    def _pushed(self, channel: Hashable, target: tuple[int, int], legacy: bool, seqs: range) -> list[Output]:
-        """Items sent unasked to a download on a lossy link (download.py): optional copies."""
-        out: list[Output] = []
-        for seq in seqs:
-            item = self.store.item(seq)
-            if item is not None:
-                out.append(Send(channel, self._item_message(seq, item, target, legacy), True))
-        return out
-
-    def _asked_before(self, node: tuple[int, int], seq: int) -> bool:
-        """Whether this requester already asked for seq in this download (then it lost a reply)."""
-        answered = self._answered.pop(node, None)
-        if answered is None:
-            answered = set()
-            if len(self._answered) >= MAX_REQUESTERS:
-                del self._answered[next(iter(self._answered))]
-        self._answered[node] = answered  # most recent last
-        if seq in answered:
-            return True
-        answered.add(seq)
-        return False
+        return self.downloads.request(origin, seq, legacy, now)
 
     # --- clear -------------------------------------------------------------------------------
     def denies(self, origin: Origin) -> bool:
@@ -365,10 +265,7 @@ class MissionTransfer:
 
     # --- time --------------------------------------------------------------------------------
     def tick(self, now: float) -> list[Output]:
-        out: list[Output] = []
-        for push in self.assist.tick(now):
-            out += self._pushed(push.channel, push.node, push.legacy, push.seqs)
-        return out + self._tick_upload(now)
+        return self.downloads.tick(now) + self._tick_upload(now)
 
     def _tick_upload(self, now: float) -> list[Output]:
         up = self._upload
@@ -449,10 +346,6 @@ class MissionTransfer:
         behind_s = self.queued_s(up.channel) + self.slowdown_s(up.channel)
         up.deadline_s = now + up.rtt.timeout_s(behind_s)
         return Send(up.channel, M.MAVLink_mission_request_message(*up.owner, up.next_seq, self.mission_type))
-
-    def _count(self, origin: Origin) -> Send:
-        count = M.MAVLink_mission_count_message(*origin.node, self.store.count(), self.mission_type)
-        return Send(origin.channel, count)
 
     def _limit_text(self) -> str:
         return f"Only {self.store.max_items} items are supported"

@@ -45,9 +45,10 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from ..config import MissionConfig
 from ..mission import wpl
 from ..mission.download import is_lossy
+from ..mission.effects import Origin, PlanChanged, Send, Text
 from ..mission.items import MissionItem, from_item_float, from_item_int
 from ..mission.stores import FenceStore, MissionStore, PlanStore, RallyStore
-from ..mission.transfer import MissionTransfer, Origin, PlanChanged, Send, Text
+from ..mission.transfer import MissionTransfer
 from ..rtt import RttTable
 from ..sim.geo import deg_e7
 from . import Incoming, Service
@@ -307,7 +308,7 @@ class MissionService(Service):
         for t in self.transfers.values():
             if t.receiving:  # a request went out or is due: its deadline may be sooner than the
                 self.ctx.wake(t.upload_channel)  # channel task's next pass (tens of ms on loopback)
-            for channel in t.assist.channels():  # likewise a lossy download's next push
+            for channel in t.downloads.assist.channels():  # likewise a lossy download's next push
                 self.ctx.wake(channel)
 
     def _push_current(self) -> None:

@@ -22,7 +22,7 @@ from pathlib import Path
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..atomic import write_atomic
-from ..mission.transfer import PlanChanged, Send, Text
+from ..mission.effects import PlanChanged, Send, Text
 
 
 class PlanWriter:
