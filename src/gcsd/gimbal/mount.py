@@ -18,82 +18,29 @@ gives its position). DO_GIMBAL_MANAGER_CONFIGURE: p1/p2 = the primary controller
 GIMBAL_MANAGER_STATUS, not enforced (as ArduPilot). Device id 0 is "the primary gimbal", 1 this one;
 any other id: FAILED.
 
-Time: `step(now, pose)` moves the gimbal's attitude towards the demand at SLEW_RATE_DEG_S per axis
-(a brushless gimbal slews; it does not jump) within the MNT1_* limits; a rate target integrates
-over the same dt. Roll and pitch are earth-frame (stabilised), yaw is body-frame, as
-GIMBAL_DEVICE_ATTITUDE_STATUS reports it (flag YAW_IN_VEHICLE_FRAME, plus YAW_LOCK when the
-target's yaw is earth-fixed). No clock is read here.
+Time: `step(now, pose)` drives the simulated gimbal towards the demand of the mode for the time
+since the last step (motion.py: the slew at SLEW_RATE_DEG_S per axis within the MNT1_* limits; a
+rate target integrates over the same dt). Roll and pitch are earth-frame (stabilised), yaw is
+body-frame, as GIMBAL_DEVICE_ATTITUDE_STATUS reports it (flag YAW_IN_VEHICLE_FRAME, plus YAW_LOCK
+when the target's yaw is earth-fixed). No clock is read here.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from .geometry import angles_to, clamp, euler, quaternion, wrap_pi
+from .geometry import clamp, euler, quaternion
+from .motion import SLEW_RATE_DEG_S, Pose, Target, aim_at, body_angles, integrate, slew
+from .params import GPS_POINT, HOME, MAVLINK, NEUTRAL, RC, RETRACT, SYSID, VALID_MODES, MountParams
 
-SLEW_RATE_DEG_S = 60.0
+__all__ = ["GPS_POINT", "HOME", "MAVLINK", "NEUTRAL", "RC", "RETRACT", "SLEW_RATE_DEG_S", "SYSID", "Mount",
+           "MountParams", "Pose", "Target"]
+
 WARNING_INTERVAL_S = 30.0
 ACCEPTED, FAILED = M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_FAILED
-RETRACT, NEUTRAL, MAVLINK, RC, GPS_POINT, SYSID, HOME = (
-    M.MAV_MOUNT_MODE_RETRACT, M.MAV_MOUNT_MODE_NEUTRAL, M.MAV_MOUNT_MODE_MAVLINK_TARGETING,
-    M.MAV_MOUNT_MODE_RC_TARGETING, M.MAV_MOUNT_MODE_GPS_POINT, M.MAV_MOUNT_MODE_SYSID_TARGET,
-    M.MAV_MOUNT_MODE_HOME_LOCATION)
-VALID_MODES = frozenset(range(RETRACT, HOME + 1))
 YAW_LOCK = M.GIMBAL_MANAGER_FLAGS_YAW_LOCK
-
-
-@dataclass(frozen=True, slots=True)
-class MountParams:
-    """MNT1_* as AP_Mount_Params (degrees)."""
-
-    default_mode: int = RC
-    rc_rate_degs: float = 0.0
-    roll_min_deg: float = -30.0
-    roll_max_deg: float = 30.0
-    pitch_min_deg: float = -90.0
-    pitch_max_deg: float = 20.0
-    yaw_min_deg: float = -180.0
-    yaw_max_deg: float = 180.0
-    retract_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    neutral_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    sysid_default: int = 0
-
-    @property
-    def has_roll(self) -> bool:
-        return self.roll_min_deg < self.roll_max_deg
-
-    @property
-    def has_pitch(self) -> bool:
-        return self.pitch_min_deg < self.pitch_max_deg
-
-    @property
-    def has_pan(self) -> bool:
-        return self.yaw_min_deg < self.yaw_max_deg
-
-
-@dataclass(frozen=True, slots=True)
-class Pose:
-    """Where the vehicle is: degrees, metres above mean sea level, yaw in radians; its home."""
-
-    lat: float
-    lon: float
-    alt_amsl_m: float
-    yaw_rad: float
-    home: tuple[float, float, float] | None = None
-
-
-@dataclass(slots=True)
-class Target:
-    """An angle (rad) or rate (rad/s) demand; roll and pitch earth-frame, yaw earth- or body-frame."""
-
-    roll: float = 0.0
-    pitch: float = 0.0
-    yaw: float = 0.0
-    yaw_is_ef: bool = False
-    is_rate: bool = False
 
 
 class Mount:
@@ -283,33 +230,11 @@ class Mount:
         elif mode in (GPS_POINT, HOME, SYSID):
             location = {GPS_POINT: self.roi, HOME: pose.home, SYSID: self.sysid_location}[mode]
             if location is not None:
-                pitch, yaw = angles_to(pose.lat, pose.lon, pose.alt_amsl_m, *location)
-                self.target = Target(0.0, pitch, yaw, True)
+                self.target = aim_at(pose, location)
         elif self.target.is_rate:
-            self._rate_angle = self._integrate(self._rate_angle, self.target, pose, dt)
-            return self._body(self._rate_angle, pose)
-        return self._body(self.target, pose)
-
-    def _integrate(self, angle: Target, rate: Target, pose: Pose, dt: float) -> Target:
-        p = self.params
-        roll = clamp(angle.roll + rate.roll * dt, math.radians(p.roll_min_deg), math.radians(p.roll_max_deg))
-        pitch = clamp(angle.pitch + rate.pitch * dt, math.radians(p.pitch_min_deg), math.radians(p.pitch_max_deg))
-        yaw = angle.yaw
-        if angle.yaw_is_ef != rate.yaw_is_ef:
-            yaw = wrap_pi(yaw + pose.yaw_rad) if rate.yaw_is_ef else wrap_pi(yaw - pose.yaw_rad)
-        yaw += rate.yaw * dt
-        if rate.yaw_is_ef:
-            yaw = wrap_pi(yaw)
-        else:
-            yaw = clamp(yaw, math.radians(p.yaw_min_deg), math.radians(p.yaw_max_deg))
-        return Target(roll, pitch, yaw, rate.yaw_is_ef)
-
-    def _body(self, t: Target, pose: Pose) -> tuple[float, float, float]:
-        p = self.params
-        yaw = wrap_pi(t.yaw - pose.yaw_rad) if t.yaw_is_ef else t.yaw
-        return (clamp(t.roll, math.radians(p.roll_min_deg), math.radians(p.roll_max_deg)),
-                clamp(t.pitch, math.radians(p.pitch_min_deg), math.radians(p.pitch_max_deg)),
-                clamp(yaw, math.radians(p.yaw_min_deg), math.radians(p.yaw_max_deg)))
+            self._rate_angle = integrate(p, self._rate_angle, self.target, pose, dt)
+            return body_angles(p, self._rate_angle, pose)
+        return body_angles(p, self.target, pose)
 
     def step(self, now: float, pose: Pose) -> None:
         """Slew towards the demand for the time since the last step."""
@@ -317,17 +242,7 @@ class Mount:
         if dt <= 0:
             return
         self._last_s = now
-        demand = self.demand(pose, dt)
-        limit = math.radians(SLEW_RATE_DEG_S) * dt
-        for axis in range(3):
-            error = demand[axis] - self.attitude[axis]
-            if axis == 2 and self.params.yaw_max_deg - self.params.yaw_min_deg >= 360:
-                error = wrap_pi(error)  # a full-circle pan takes the short way round
-            move = clamp(error, -limit, limit)
-            self.attitude[axis] += move
-            if axis == 2:
-                self.attitude[2] = wrap_pi(self.attitude[2])
-            self.rates[axis] = move / dt
+        slew(self.params, self.attitude, self.rates, self.demand(pose, dt), dt)
 
     # --- what the manager says ---------------------------------------------------------------
     def yaw_locked(self) -> bool:

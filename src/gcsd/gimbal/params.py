@@ -3,17 +3,53 @@
 ArduPilot shows the MNT1_ group only once MNT1_TYPE is set (AP_PARAM_FLAG_ENABLE); with the
 simulated gimbal MNT1_TYPE is 7 (BrushlessPWM: a stabilised brushless gimbal) and the rest of the
 group follows it in ArduPilot's order, with ArduPilot's defaults and ranges. `mount_params`
-reads them back into a `MountParams` (the limits, modes and angles the core uses).
+reads them back into a `MountParams` (the limits, modes and angles the core uses; the MAV_MOUNT_MODE
+values MNT1_DEFLT_MODE takes are named here).
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
+
+from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..params.store import INT8, INT16, REAL32, ParamDef
-from .mount import MountParams
 
 MOUNT_TYPE_BRUSHLESS_PWM = 7
+RETRACT, NEUTRAL, MAVLINK, RC, GPS_POINT, SYSID, HOME = (  # MAV_MOUNT_MODE, MNT1_DEFLT_MODE's values
+    M.MAV_MOUNT_MODE_RETRACT, M.MAV_MOUNT_MODE_NEUTRAL, M.MAV_MOUNT_MODE_MAVLINK_TARGETING,
+    M.MAV_MOUNT_MODE_RC_TARGETING, M.MAV_MOUNT_MODE_GPS_POINT, M.MAV_MOUNT_MODE_SYSID_TARGET,
+    M.MAV_MOUNT_MODE_HOME_LOCATION)
+VALID_MODES = frozenset(range(RETRACT, HOME + 1))
+
+
+@dataclass(frozen=True, slots=True)
+class MountParams:
+    """MNT1_* as AP_Mount_Params (degrees)."""
+
+    default_mode: int = RC
+    rc_rate_degs: float = 0.0
+    roll_min_deg: float = -30.0
+    roll_max_deg: float = 30.0
+    pitch_min_deg: float = -90.0
+    pitch_max_deg: float = 20.0
+    yaw_min_deg: float = -180.0
+    yaw_max_deg: float = 180.0
+    retract_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    neutral_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    sysid_default: int = 0
+
+    @property
+    def has_roll(self) -> bool:
+        return self.roll_min_deg < self.roll_max_deg
+
+    @property
+    def has_pitch(self) -> bool:
+        return self.pitch_min_deg < self.pitch_max_deg
+
+    @property
+    def has_pan(self) -> bool:
+        return self.yaw_min_deg < self.yaw_max_deg
 
 
 def _real(name: str, default: float, lo: float, hi: float, units: str, text: str) -> ParamDef:
