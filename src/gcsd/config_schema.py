@@ -194,7 +194,7 @@ class Config:
     routing: RoutingConfig = field(default_factory=RoutingConfig)
     flight_logs: FlightLogsConfig = field(default_factory=FlightLogsConfig)
     can: CanConfig = field(default_factory=CanConfig)
-    http: HttpConfig = HttpConfig()  # config_http.py
+    http: HttpConfig = field(default_factory=HttpConfig)  # config_http.py
     source: Source = field(default=Source(), compare=False, repr=False)
 
 

@@ -69,7 +69,7 @@ async def serve(path: Path, snapshot, commands: dict | None = None, on_error=Non
             else:
                 try:
                     error = await handler(request)
-                except Exception:
+                except Exception:  # noqa: BLE001  (a failed request is answered, never ends the server)
                     if on_error is not None:
                         on_error(request.get("cmd"))
                     error = "the daemon failed to do it (its log has the traceback)"
@@ -109,7 +109,8 @@ def _answers(path: Path) -> bool:
 def query(path: Path, timeout_s: float = 3.0) -> dict:
     document = request(path, {"cmd": "status"}, timeout_s)
     if not isinstance(document, dict) or not isinstance(document.get("channels"), list):
-        raise ValueError("the answer is not a gcsd status document")
+        # a wrong answer, not a wrong argument: callers catch ValueError, as for an answer that is no JSON
+        raise ValueError("the answer is not a gcsd status document")  # noqa: TRY004
     return document
 
 

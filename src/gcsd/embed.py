@@ -39,7 +39,7 @@ from __future__ import annotations
 import asyncio
 import signal
 from collections.abc import Callable
-from typing import Protocol, Union, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 from . import statelock
 from .config import Config
@@ -52,7 +52,7 @@ class VehicleBackend(Protocol):
     def update(self, state: VehicleState, setpoint: Setpoint, limits: Limits, dt_s: float) -> None: ...
 
 
-Backends = Union[VehicleBackend, Callable[[int], VehicleBackend]]
+Backends = VehicleBackend | Callable[[int], VehicleBackend]
 
 
 def _factory(backend: Backends) -> Callable[[int], VehicleBackend]:
@@ -106,7 +106,7 @@ def run(config: Config, backend: Backends) -> int:
         loop.add_signal_handler(signal.SIGHUP, lambda: running and running[0].sync_state())
         try:
             await serve(config, backend, stop, started=running.append)
-        except Exception:
+        except Exception:  # noqa: BLE001  (an embedding program gets exit 1 and the traceback logged)
             import structlog
             structlog.get_logger("gcsd.embed").exception("embedded_daemon_failed")
             return 1

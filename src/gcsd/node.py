@@ -221,7 +221,7 @@ class VehicleNode:
             return
         try:
             handler(Incoming(frame.msg, frame, channel, now))
-        except Exception:
+        except Exception:  # noqa: BLE001  (a service's error boundary: counted, the channel goes on)
             self.errors.failed(f"handler:{name}", now, channel=channel.name, msg=name, sysid=frame.sysid,
                                compid=frame.compid)
 
@@ -230,7 +230,7 @@ class VehicleNode:
         """Advance the autopilot and its simulation (or the embedding backend) to `now`."""
         try:
             self.autopilot.step(now)
-        except Exception:
+        except Exception:  # noqa: BLE001  (the simulation's boundary: counted, stepped again next time)
             self.errors.failed(self._sim_component, now, sysid=self.sysid)
 
     def send_pass(self, channel: Channel, now: float) -> float | None:
@@ -251,7 +251,7 @@ class VehicleNode:
                 if not channel.has_room(msg.unpacker.size + 12):
                     return False
                 channel.send_message(msg, sysid, compid)
-            except Exception:  # skipped this time; the slot keeps its phase
+            except Exception:  # noqa: BLE001  (skipped this time; the slot keeps its phase)
                 errors.failed(f"producer:{M.mavlink_map[msgid].msgname}", now, channel=channel.name, sysid=sysid)
             return True
 
@@ -275,7 +275,7 @@ class VehicleNode:
         for service in self._senders:
             try:
                 d = service.pending(channel, now, send_msg)
-            except Exception:
+            except Exception:  # noqa: BLE001  (a service's error boundary: counted, the others still send)
                 errors.failed(f"service:{type(service).__name__}", now, channel=channel.name, sysid=sysid)
                 continue
             if d is not None and (deadline is None or d < deadline):
@@ -285,7 +285,7 @@ class VehicleNode:
     def _drain_text(self, channel: Channel, now: float, send_text) -> bool:
         try:
             return self.statustext.drain(channel.index, now, send_text)
-        except Exception:
+        except Exception:  # noqa: BLE001  (the text queue's boundary: counted, the pass goes on)
             self.errors.failed("statustext", now, channel=channel.name, sysid=self.sysid)
             return True
 

@@ -141,9 +141,8 @@ class SendScheduler:
                 return False
             self._pushed.discard(msgid)
         while True:
-            if not self._sending:
-                if not self._start_next_bucket(now):
-                    return True
+            if not self._sending and not self._start_next_bucket(now):
+                return True
             while self._sending:
                 if not send(self._sending[0]):
                     return False

@@ -31,7 +31,7 @@ class TlogWriter:
         self.max_bytes = max_bytes
         self.keep = keep
         self._buf = bytearray()
-        self._file = open(self.path, "ab")
+        self._file = open(self.path, "ab")  # noqa: SIM115  (open for the daemon's life; close() closes it)
         self._size = self._file.tell()
         self.frames = 0
         self._worker = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="gcsd-tlog")
@@ -68,7 +68,7 @@ class TlogWriter:
             if older.exists():
                 older.replace(self.path.with_name(f"{self.path.name}.{n + 1}"))
         self.path.replace(self.path.with_name(f"{self.path.name}.1"))
-        self._file = open(self.path, "ab")
+        self._file = open(self.path, "ab")  # noqa: SIM115  (the next file of the rotation, as above)
         self._size = 0
 
     def close(self) -> None:

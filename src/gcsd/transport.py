@@ -298,7 +298,7 @@ async def run_channel(
         baud = hunt.opening(clock()) if hunt is not None else None
         try:
             close, closed = await _open(channel, baud)
-        except Exception as exc:  # OSError, serial.SerialException and friends
+        except Exception as exc:  # noqa: BLE001  (OSError, serial.SerialException and friends: retried)
             error = str(exc) if isinstance(exc, OSError) else repr(exc)
             if not ever_opened and channel.config.type in SERVER_TYPES:
                 host, port = channel.config.address

@@ -36,7 +36,7 @@ DISARM = "DISARM"
 
 @dataclass(frozen=True)
 class Settings:
-    limits: Limits = Limits()
+    limits: Limits = field(default_factory=Limits)
     fixed_wing: bool = False  # must keep flying: loiters instead of hovering, needs no takeoff command
     rtl_alt_m: float = 15.0  # RTL altitude above home (negative: keep the current altitude)
     rtl_final_alt_m: float = 0.0  # after the return: 0 lands, > 0 hovers at this height

@@ -151,7 +151,7 @@ def _errors(api: Api):
             if exc.status < 400:
                 raise
             return error(exc.status, exc.reason, {k: v for k, v in exc.headers.items() if k == "Allow"})
-        except Exception:
+        except Exception:  # noqa: BLE001  (the error boundary of a request: counted, answered 500)
             api.failed("http")
             return error(500, "internal error (counted in the daemon's error counts)")
     return middleware

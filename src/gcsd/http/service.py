@@ -79,7 +79,7 @@ class HttpService:
         guard: a fault here is counted and never costs the frame its routing."""
         try:
             self.face.frame_seen(channel, frame, now)
-        except Exception:
+        except Exception:  # noqa: BLE001  (the tree's guard: counted, the frame is still routed)
             self._errors.failed("http:tap", self._now(), channel=channel.name, msg=frame.name)
 
     async def open(self) -> tuple:

@@ -59,6 +59,7 @@ log = structlog.get_logger("gcsd.mission")
 
 SLOW_REASON = "mission"
 GUIDED_CURRENT = (2, 3)  # MISSION_ITEM.current: 2 guided "fly to", 3 change altitude
+DEFAULT_MISSION_CONFIG = MissionConfig()
 
 
 def home_item(state) -> MissionItem:
@@ -73,7 +74,8 @@ class MissionService(Service):
         | M.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE | M.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
     )
 
-    def __init__(self, ctx, config: MissionConfig = MissionConfig(), state_dir: Path | None = None) -> None:
+    def __init__(self, ctx, config: MissionConfig = DEFAULT_MISSION_CONFIG,
+                 state_dir: Path | None = None) -> None:
         self.ctx = ctx
         self.state_dir = None if state_dir is None else Path(state_dir)
         self.writer = PlanWriter(ctx.errors, ctx.now)  # an upload's plan written off the loop

@@ -23,6 +23,7 @@ request opens it again.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -78,7 +79,7 @@ class SerialPassthrough:
         if port is None:
             try:
                 port = self.open_port(cfg.device, want)
-            except Exception as exc:  # the device is missing, busy, not a tty...
+            except Exception as exc:  # noqa: BLE001  (the device is missing, busy, not a tty...)
                 log.warning("serial_control_open_failed", device=cfg.device, error=str(exc))
                 return None
             self.ports[device], self.bauds[device] = port, want
@@ -88,7 +89,7 @@ class SerialPassthrough:
         try:
             action()
             return True
-        except Exception as exc:
+        except Exception as exc:  # noqa: BLE001  (a vanished device must not take the node down)
             log.warning("serial_control_io_failed", device=self.config[device].device, error=str(exc))
             self._close(device)
             return False
@@ -104,10 +105,8 @@ class SerialPassthrough:
     def _close(self, device: int) -> None:
         port = self.ports.pop(device, None)
         if port is not None:
-            try:
+            with contextlib.suppress(Exception):  # closing a device that is gone: nothing left to do
                 port.close()
-            except Exception:
-                pass
 
     def replies(self, channel, now: float) -> list:
         """SERIAL_CONTROL replies due on `channel` now: a full chunk is waiting, or time is up."""
