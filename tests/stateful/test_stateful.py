@@ -16,7 +16,7 @@ Invariants after every step (`check`):
 - a station holding the current key is answered on the UDP and on the TCP channel (where the
   model says it must be: a key is set, or signing is not required);
 - HEARTBEAT about 1 Hz: no gap over HEARTBEAT_GAP_S since the start, one in the last 2.5 s,
-  7 to 13 in the last 10 s;
+  7 to HEARTBEATS_IN_10_S_MAX in the last 10 s (a mode change or an arm pushes one at once);
 - `gcsd status --json` (the control socket) answers and its `errors` are empty; no
   component_failed / command_failed / traceback in the log;
 - the state files parse (mav.parm, the three plans, signing.key); an accepted plan is on disk
@@ -82,6 +82,7 @@ EXAMPLES_PER_ROUND = 3  # the first example of a hypothesis run is its simplest 
 
 KEYS = {"k1": bytes(range(32)), "k2": bytes(range(100, 132)), "zero": bytes(32)}
 HEARTBEAT_GAP_S = 3.0
+HEARTBEATS_IN_10_S_MAX = 25  # 10 at 1 Hz, plus the ones pushed at once by mode changes and arming
 CRASH_WINDOW_S = 2.5  # mav.parm is written at most once a second (services/params.py), plus margin
 RSS_GROWTH_KB = 40_000
 MAX_STATIONS = 5  # joined stations per run (the daemon serves max_peers 8 per channel)
@@ -529,9 +530,9 @@ class GcsdMachine(RuleBasedStateMachine):
         assert times and now - times[-1] < 2.5, f"no HEARTBEAT for {now - (times or [0])[-1]:.1f} s"
         gaps = [b - a for a, b in itertools.pairwise(times)]
         assert max(gaps, default=0.0) < HEARTBEAT_GAP_S, f"HEARTBEAT gap of {max(gaps):.1f} s"
-        if now - self.monitor.started_at > 12.0:  # about 1 Hz, not more: the last 10 s hold 10 +- 3
-            recent = [t for t in times if t > now - 10.0]
-            assert 7 <= len(recent) <= 13, f"{len(recent)} HEARTBEATs in the last 10 s"
+        if now - self.monitor.started_at > 12.0:  # about 1 Hz: no storm (a mode change, an arm or a
+            recent = [t for t in times if t > now - 10.0]  # new peer pushes one at once, by design)
+            assert 7 <= len(recent) <= HEARTBEATS_IN_10_S_MAX, f"{len(recent)} HEARTBEATs in the last 10 s"
 
     def _check_plans(self) -> None:
         files = self.d.state_files()
