@@ -43,11 +43,30 @@ class Received:
         return self.msg.get_type()
 
 
+RCVBUF_BYTES = 4 << 20
+
+
+def big_receive_buffer(sock: socket.socket) -> None:
+    """The suite runs 4 tests at a time (pytest-xdist): a client descheduled for a moment must not
+    lose what the daemon sent meanwhile (a 1 000-parameter list arrives at 3 000 datagrams/s,
+    more than the default buffer holds). SO_RCVBUFFORCE (root, as in CI) passes rmem_max."""
+    for option in (getattr(socket, "SO_RCVBUFFORCE", None), socket.SO_RCVBUF):
+        if option is None:
+            continue
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, option, RCVBUF_BYTES)
+            return
+        except OSError:
+            continue
+
+
 class Client:
     """One MAVLink node (sysid, compid) on one socket, recording every frame it receives."""
 
     def __init__(self, url: str, sysid: int, compid: int, version: int = 2) -> None:
         self.conn = mavutil.mavlink_connection(url, source_system=sysid, source_component=compid)
+        if self.conn.port.type == socket.SOCK_DGRAM:
+            big_receive_buffer(self.conn.port)
         dialect = mavlink2 if version == 2 else mavlink1
         self.mav = dialect.MAVLink(self.conn, srcSystem=sysid, srcComponent=compid)
         self.mav.robust_parsing = True
