@@ -46,11 +46,11 @@ class RunningDaemon:
 
         try:
             asyncio.run(body())
-        except BaseException as exc:  # surfaced to the test by start()/stop()
+        except BaseException as exc:  # noqa: BLE001  (surfaced to the test by start()/stop())
             self._error = exc
             self._ready.set()
 
-    def start(self) -> "RunningDaemon":
+    def start(self) -> RunningDaemon:
         self._thread.start()
         if not self._ready.wait(START_TIMEOUT_S) or self._error:
             raise RuntimeError(f"daemon did not start: {self._error!r}")

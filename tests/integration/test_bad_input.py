@@ -11,8 +11,20 @@ import time
 import pytest
 
 from .helpers import (
-    M, VEHICLE, Client, from_vehicle, is_ack, measure_rates, packed, pump, rate_hz, tcp_channel, tcp_url,
-    udp_channel, udp_url, wait_for,
+    VEHICLE,
+    Client,
+    M,
+    from_vehicle,
+    is_ack,
+    measure_rates,
+    packed,
+    pump,
+    rate_hz,
+    tcp_channel,
+    tcp_url,
+    udp_channel,
+    udp_url,
+    wait_for,
 )
 
 SEED = 0x6CD5

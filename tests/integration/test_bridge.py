@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from .bridge import NullModem, bridge_configs
-from .helpers import M, Client, is_type, pump, udp_url, wait_for
+from .helpers import Client, M, is_type, pump, udp_url, wait_for
 
 FC = (1, 1)
 COMPANION = (1, 191)

@@ -13,7 +13,16 @@ import time
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 
 from .helpers import (
-    M, VEHICLE, free_listener, from_vehicle, is_ack, pump, tcp_channel, tcp_url, udp_channel, udp_url,
+    VEHICLE,
+    M,
+    free_listener,
+    from_vehicle,
+    is_ack,
+    pump,
+    tcp_channel,
+    tcp_url,
+    udp_channel,
+    udp_url,
     wait_for,
 )
 

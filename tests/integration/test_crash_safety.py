@@ -22,7 +22,6 @@ import socket
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 import yaml
@@ -30,7 +29,7 @@ import yaml
 from gcsd.mission import wpl
 from gcsd.params.parmfile import read_parm
 
-from .helpers import M, Client, pump
+from .helpers import Client, M, pump
 
 ROUNDS = int(os.environ.get("GCSD_KILL_ROUNDS", "40"))
 VEHICLE = (1, 1)
@@ -70,7 +69,7 @@ def drive(c: Client, rng: random.Random, until: float) -> None:
 def test_sigkill_at_random_moments_never_leaves_a_torn_state_file(tmp_path):
     state = tmp_path / "state"
     rng = random.Random(1122)
-    valid_plans = {tuple()}  # what the mission file may hold: nothing yet, or an uploaded plan
+    valid_plans = {()}  # what the mission file may hold: nothing yet, or an uploaded plan
     for n in range(2, 13):
         valid_plans.add(tuple(it.x for it in plan(n)[1:]))  # item 0 is home
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:

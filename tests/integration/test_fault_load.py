@@ -284,7 +284,7 @@ def test_ten_ground_stations_download_parameters_and_the_mission_at_once(tmp_pat
             try:
                 c = clients[i]
                 results[i] = (len(param_names(c)), len(download_mission(c)))
-            except Exception as exc:  # surfaced below, in the test thread
+            except Exception as exc:  # noqa: BLE001  (surfaced below, in the test thread)
                 errors.append(exc)
 
         threads = [threading.Thread(target=hammer, args=(i,)) for i in range(10)]

@@ -84,7 +84,7 @@ def test_the_list_is_ardupilots_set_and_param_pck_serves_the_same(daemon, client
     assert [n for n, _, _ in listed] == [n for n, _, _ in want]
     assert [t for _, _, t in listed] == [t for _, _, t in want]
     assert [(n, v) for n, v, _ in listed if n not in COUNTED] == [(n, v) for n, v, _ in want if n not in COUNTED]
-    assert dict((n, v) for n, v, _ in listed)["STAT_BOOTCNT"] == 1  # a first start, as the SITL capture
+    assert {n: v for n, v, _ in listed}["STAT_BOOTCNT"] == 1  # a first start, as the SITL capture
     texts = [_name(r.msg.text) for r in c.since(mark, "STATUSTEXT") if r.src == VEHICLE]
     firmware = {"copter": "ArduCopter", "plane": "ArduPlane", "rover": "ArduRover"}[vehicle]
     assert f"{firmware} V4.6.3 (3fc7011a)" in texts  # the banner goes first, as ArduPilot's

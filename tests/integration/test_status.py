@@ -21,7 +21,7 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def gcsd(*args: str, cwd: Path, env: dict) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "gcsd", *args], cwd=cwd, env=env, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "gcsd", *args], cwd=cwd, env=env, check=False, capture_output=True,
                           text=True, timeout=20)
 
 

@@ -9,7 +9,17 @@ from __future__ import annotations
 import pytest
 
 from .helpers import (
-    M, VEHICLE, Client, Received, from_vehicle, is_ack, measure_rates, pump, udp_channel, udp_url, wait_for,
+    VEHICLE,
+    Client,
+    M,
+    Received,
+    from_vehicle,
+    is_ack,
+    measure_rates,
+    pump,
+    udp_channel,
+    udp_url,
+    wait_for,
 )
 
 TOLERANCE = 0.10

@@ -45,7 +45,8 @@ pytest.importorskip("mavsdk.asyncio", reason="mavsdk is a test extra: pip instal
 
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
 from mavsdk.asyncio.plugins.ftp import FtpAsync
-from .conftest import mavproxy_script as _mavproxy_script  # noqa: E402
+
+from .conftest import mavproxy_script as _mavproxy_script
 
 pytestmark = pytest.mark.interop
 

@@ -43,7 +43,8 @@ GLOBAL_POSITION_INT_LINE = re.compile(
     r"GLOBAL_POSITION_INT \{time_boot_ms : \d+, lat : (?P<lat>-?\d+), lon : (?P<lon>-?\d+), "
     r"alt : (?P<alt>-?\d+), relative_alt : (?P<relative_alt>-?\d+)"
 )
-from .conftest import mavproxy_script as _mavproxy_script, expect_line as _expect  # noqa: E402
+from .conftest import expect_line as _expect
+from .conftest import mavproxy_script as _mavproxy_script
 
 
 @pytest.fixture

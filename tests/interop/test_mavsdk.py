@@ -13,16 +13,16 @@ from __future__ import annotations
 import asyncio
 import math
 import time
+from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import aclosing, asynccontextmanager
-from typing import AsyncIterator, Awaitable, Callable
 
 import pytest
 
 pytest.importorskip("mavsdk.asyncio", reason="mavsdk is a test extra: pip install -e .[test]")
 
-from mavsdk.asyncio import Autopilot, ComponentType, Configuration, Mavsdk, System, Vehicle  # noqa: E402
-from mavsdk.asyncio.plugins.action import ActionAsync, ActionError  # noqa: E402
-from mavsdk.asyncio.plugins.telemetry import FixType, FlightMode, TelemetryAsync  # noqa: E402
+from mavsdk.asyncio import Autopilot, ComponentType, Configuration, Mavsdk, System, Vehicle
+from mavsdk.asyncio.plugins.action import ActionAsync, ActionError
+from mavsdk.asyncio.plugins.telemetry import FixType, FlightMode, TelemetryAsync
 
 CONNECT_LIMIT_S = 2.0
 DISCOVERY_WAIT_S = 5.0  # longer than the limit, so a slow discovery is measured, not just failed

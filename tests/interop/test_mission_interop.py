@@ -26,19 +26,19 @@ import pytest
 
 pytest.importorskip("mavsdk.asyncio", reason="mavsdk is a test extra: pip install -e .[test]")
 
-from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
-from mavsdk.asyncio.plugins.geofence import GeofenceAsync  # noqa: E402
-from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync  # noqa: E402
-from mavsdk.asyncio.plugins.mission_raw import MissionItem, MissionRawAsync, MissionRawError  # noqa: E402
-from mavsdk.plugins.mavlink_direct import MavlinkMessage  # noqa: E402
-from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
+from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
+from mavsdk.asyncio.plugins.geofence import GeofenceAsync
+from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+from mavsdk.asyncio.plugins.mission_raw import MissionItem, MissionRawAsync, MissionRawError
+from mavsdk.plugins.mavlink_direct import MavlinkMessage
+from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.mission import MissionItem as Item  # noqa: E402
-from integration.helpers import Client, udp_url  # noqa: E402
-from integration.mission_client import LossyProxy, MissionClient  # noqa: E402
+from gcsd.mission import MissionItem as Item
+from integration.helpers import Client, udp_url
+from integration.mission_client import LossyProxy, MissionClient
 
-from .conftest import DEFAULT_HOME, REPO_ROOT  # noqa: E402
-from .conftest import mavproxy_script as _mavproxy_script  # noqa: E402
+from .conftest import DEFAULT_HOME, REPO_ROOT
+from .conftest import mavproxy_script as _mavproxy_script
 
 DISCOVERY_WAIT_S = 5.0
 LONG_REASON = "takes minutes: set GCSD_LONG_TESTS=1"
@@ -221,10 +221,8 @@ def wpl(lines: list[tuple]) -> str:
     """A QGC WPL 110 file as MAVProxy writes it (six decimals)."""
     out = ["QGC WPL 110"]
     for seq, (cur, frame, cmd, p1, p2, p3, p4, x, y, z, auto) in enumerate(lines):
-        out.append(
-            "%u\t%u\t%u\t%u\t%f\t%f\t%f\t%f\t%f\t%f\t%f\t%u"
-            % (seq, cur, frame, cmd, p1, p2, p3, p4, x, y, z, auto)
-        )
+        out.append(f"{int(seq)}\t{int(cur)}\t{int(frame)}\t{int(cmd)}\t{p1:f}\t{p2:f}\t{p3:f}\t{p4:f}\t"
+                   f"{x:f}\t{y:f}\t{z:f}\t{int(auto)}")
     return "\n".join(out) + "\n"
 
 

@@ -25,6 +25,7 @@ import struct
 import sys
 import time
 from pathlib import Path
+from typing import Self
 
 import pytest
 import yaml
@@ -36,9 +37,11 @@ from .conftest import GCSD_START_TIMEOUT_S, GCSD_STOP_TIMEOUT_S, REPO_ROOT, Gcsd
 pytest.importorskip("MAVProxy", reason="MAVProxy is a test extra: pip install -e .[test]")
 pytest.importorskip("mavsdk.asyncio", reason="mavsdk is a test extra: pip install -e .[test]")
 
-from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
-from mavsdk.asyncio.plugins.param import ParamAsync, ParamError  # noqa: E402
-from .conftest import mavproxy_script as _mavproxy_script, expect_line as _expect  # noqa: E402
+from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
+from mavsdk.asyncio.plugins.param import ParamAsync, ParamError
+
+from .conftest import expect_line as _expect
+from .conftest import mavproxy_script as _mavproxy_script
 
 pytestmark = pytest.mark.interop
 
@@ -78,7 +81,7 @@ class ParamClient:
     def close(self) -> None:
         self.conn.close()
 
-    def __enter__(self) -> "ParamClient":
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc) -> None:

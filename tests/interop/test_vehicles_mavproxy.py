@@ -15,7 +15,9 @@ import sys
 import time
 
 import pytest
-from .conftest import mavproxy_script as _mavproxy_script, expect_line as _expect  # noqa: E402
+
+from .conftest import expect_line as _expect
+from .conftest import mavproxy_script as _mavproxy_script
 
 pytest.importorskip("MAVProxy", reason="MAVProxy is a test extra: pip install -e .[test]")
 

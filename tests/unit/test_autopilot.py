@@ -3,6 +3,8 @@ CONDITION items, RTL to rally points, the fence, failsafes, guided messages, sti
 
 from __future__ import annotations
 
+import itertools
+
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 from vehicle_harness import Harness
@@ -84,7 +86,7 @@ def test_repeat_relay_toggles_the_relay_count_times(tmp_path):
     for _ in range(40):
         h.run(0.1)
         states.append(h.state.relays[2])
-    changes = sum(1 for a, b in zip(states, states[1:]) if a != b)
+    changes = sum(1 for a, b in itertools.pairwise(states) if a != b)
     assert changes == 5 and states[-1] is False
 
 

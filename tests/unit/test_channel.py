@@ -384,7 +384,7 @@ def test_the_reply_queue_is_bounded_and_counts_what_it_drops():
     from gcsd.outbox import REPLY_QUEUE_MAX
 
     clock = Clock()
-    ch, sent = make_channel(clock, bandwidth=1000)
+    ch, _sent = make_channel(clock, bandwidth=1000)
     ch.add_peer(("10.0.0.1", 5), lambda data: True)
     ch.tick(clock.t, 0.0)
     while ch.write(HEARTBEAT):

@@ -78,7 +78,7 @@ def test_check_config_of_a_missing_file_exits_2(tmp_path, capsys):
 def test_python_m_gcsd_check_config_of_a_bad_file_exits_2(bad_config):
     env = {**os.environ, "PYTHONPATH": str(REPO / "src")}
     result = subprocess.run([sys.executable, "-m", "gcsd", "check-config", str(bad_config)],
-                            capture_output=True, text=True, env=env, timeout=60)
+                            check=False, capture_output=True, text=True, env=env, timeout=60)
     assert result.returncode == 2
     first_problem = f"{bad_config}:2: vehicle.sysid: expected an integer 1..255, got 0"
     assert result.stderr.splitlines()[0] == first_problem
@@ -87,7 +87,7 @@ def test_python_m_gcsd_check_config_of_a_bad_file_exits_2(bad_config):
 def test_python_m_gcsd_check_config_of_a_good_file_exits_0():
     env = {**os.environ, "PYTHONPATH": str(REPO / "src")}
     result = subprocess.run([sys.executable, "-m", "gcsd", "check-config", str(DEFAULT_YAML)],
-                            capture_output=True, text=True, env=env, timeout=60)
+                            check=False, capture_output=True, text=True, env=env, timeout=60)
     assert (result.returncode, result.stdout) == (0, f"{DEFAULT_YAML}: ok\n")
 
 
@@ -172,7 +172,7 @@ def test_dash_c_before_check_config_is_refused_with_a_hint(capsys):
 def test_python_m_gcsd_dash_c_of_a_bad_file_exits_2(bad_config):
     env = {**os.environ, "PYTHONPATH": str(REPO / "src")}
     result = subprocess.run([sys.executable, "-m", "gcsd", "-c", str(bad_config)],
-                            capture_output=True, text=True, env=env, timeout=60)
+                            check=False, capture_output=True, text=True, env=env, timeout=60)
     assert result.returncode == 2
     assert result.stderr.splitlines()[0] == f"{bad_config}:2: vehicle.sysid: expected an integer 1..255, got 0"
 

@@ -194,12 +194,12 @@ def test_ten_channels_are_allowed():
 BAD_CONFIGS = [
     ("vehicle:\n  sysdi: 2\n", "gcsd.yaml:2: vehicle.sysdi: unknown key; did you mean 'sysid'?"),
     ("chanels: []\n", "gcsd.yaml:1: chanels: unknown key; did you mean 'channels'?"),
-    ("colour: red\n", "gcsd.yaml:1: colour: unknown key (known keys: vehicle, state_dir, params_file, gcs, "
-                      "mission, ftp, signing, channels, log, serial_control, routing, flight_logs, can, http)"),
+    ("colour: red\n", ("gcsd.yaml:1: colour: unknown key (known keys: vehicle, state_dir, params_file, gcs, "
+                       "mission, ftp, signing, channels, log, serial_control, routing, flight_logs, can, http)")),
     ("vehicle: {sysid: 1, sysid: 2}\n", "gcsd.yaml:1: vehicle.sysid: duplicate key"),
     ("vehicle: copter\n", "gcsd.yaml:1: vehicle: expected a mapping, got 'copter'"),
-    ("vehicle: {type: coptr}\n", "gcsd.yaml:1: vehicle.type: expected copter|plane|rover|sub|tracker|blimp|"
-                                 "companion, got 'coptr'; did you mean 'copter'?"),
+    ("vehicle: {type: coptr}\n", ("gcsd.yaml:1: vehicle.type: expected copter|plane|rover|sub|tracker|blimp|"
+                                  "companion, got 'coptr'; did you mean 'copter'?")),
     ("vehicle: {sysid: 0}\n", "gcsd.yaml:1: vehicle.sysid: expected an integer 1..255, got 0"),
     ("vehicle: {sysid: 256}\n", "gcsd.yaml:1: vehicle.sysid: expected an integer 1..255, got 256"),
     ("vehicle: {sysid: one}\n", "gcsd.yaml:1: vehicle.sysid: expected an integer 1..255, got 'one'"),
@@ -234,10 +234,10 @@ BAD_CONFIGS = [
     ("mission: {retry_ms: 10}\n", "gcsd.yaml:1: mission.retry_ms: expected an integer 50..5000, got 10"),
     ("mission: {max_item: 5}\n", "gcsd.yaml:1: mission.max_item: unknown key; did you mean 'max_items'?"),
     ("mission: 700\n", "gcsd.yaml:1: mission: expected a mapping, got 700"),
-    ("ftp: {root: /srv/ftp}\n", "gcsd.yaml:1: ftp.root: expected a path relative to state_dir without '..', "
-                                "got '/srv/ftp'"),
-    ("ftp: {root: a/../../b}\n", "gcsd.yaml:1: ftp.root: expected a path relative to state_dir without '..', "
-                                 "got 'a/../../b'"),
+    ("ftp: {root: /srv/ftp}\n", ("gcsd.yaml:1: ftp.root: expected a path relative to state_dir without '..', "
+                                 "got '/srv/ftp'")),
+    ("ftp: {root: a/../../b}\n", ("gcsd.yaml:1: ftp.root: expected a path relative to state_dir without '..', "
+                                  "got 'a/../../b'")),
     ("ftp: {max_file_bytes: 0}\n", "gcsd.yaml:1: ftp.max_file_bytes: expected an integer 1..4294967295, got 0"),
     ("ftp: {max_file_bytes: 4294967296}\n",
      "gcsd.yaml:1: ftp.max_file_bytes: expected an integer 1..4294967295, got 4294967296"),
@@ -284,9 +284,9 @@ BAD_CONFIGS = [
     ("channels:\n  - {name: fc, type: serial, device: /dev/ttyS0, streams: {extra1: -1}}\n",
      "gcsd.yaml:2: channels[0].streams.extra1: expected a number 0..50, got -1"),
     ("channels:\n  - {name: fc, type: serial, device: /dev/ttyS0, options: [no_fwd]}\n",
-     "gcsd.yaml:2: channels[0].options[0]: expected "
-     "no_forward|no_stream_override|unsigned_ok|forward_bad_crc|high_latency|sign_forwarded, "
-     "got 'no_fwd'; did you mean 'no_forward'?"),
+     ("gcsd.yaml:2: channels[0].options[0]: expected "
+      "no_forward|no_stream_override|unsigned_ok|forward_bad_crc|high_latency|sign_forwarded, "
+      "got 'no_fwd'; did you mean 'no_forward'?")),
     ("channels:\n  - {name: fc, type: serial, device: /dev/ttyS0, options: no_forward}\n",
      "gcsd.yaml:2: channels[0].options: expected a list, got 'no_forward'"),
     ("channels:\n  - {name: fc, type: serial, device: /dev/ttyS0, private: no thanks}\n",

@@ -783,7 +783,7 @@ def test_each_result_code_is_produced(name, scenario):
 
 
 def test_a_do_jump_may_target_any_item_of_the_plan_the_upload_makes_but_not_beyond():
-    jump = lambda target: MissionItem(M.MAV_CMD_DO_JUMP, M.MAV_FRAME_MISSION, param1=target, param2=1)  # noqa: E731
+    jump = lambda target: MissionItem(M.MAV_CMD_DO_JUMP, M.MAV_FRAME_MISSION, param1=target, param2=1)
     mt = machine(MISSION)
     upload(mt, MISSION.plan(3))
     mt.mission_write_partial_list(GCS, 3, 3, 1.0)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
@@ -135,7 +136,7 @@ def test_a_rover_drives_to_the_point_stays_on_the_ground_and_turns_no_faster_tha
     fly(GroundDynamics(), s, Setpoint(Kind.GOTO, lat, lon, HOME[2]), lim, 30, lambda v: yaws.append(v.heading_deg))
     assert distance_m(s.lat, s.lon, lat, lon) < 1.0
     assert s.relative_alt_m == 0.0 and s.on_ground
-    assert max(abs(wrap_180(b - a)) for a, b in zip(yaws, yaws[1:])) <= 90 * DT + 1e-6
+    assert max(abs(wrap_180(b - a)) for a, b in itertools.pairwise(yaws)) <= 90 * DT + 1e-6
 
 
 def test_a_sub_dives_but_never_rises_above_the_surface_and_floats_up_when_disarmed():

@@ -13,12 +13,12 @@ from __future__ import annotations
 import yaml
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from gcsd.boundary import ErrorCounts
 from gcsd.channel import Channel
 from gcsd.clock import Clock
 from gcsd.codec import Frame
-from gcsd.config import parse_config
-from gcsd.boundary import ErrorCounts
 from gcsd.compose import build_vehicle
+from gcsd.config import parse_config
 from gcsd.signing import SigningManager
 
 GCS = (255, 190)
