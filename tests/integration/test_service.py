@@ -31,11 +31,12 @@ def unit_exec_start() -> list[str]:
     raise AssertionError("no ExecStart in the unit")
 
 
-def write_config(tmp_path: Path, port: int = 0, extra: str = "") -> Path:
+def write_config(tmp_path: Path, port: int = 0, extra: str = "", tail: str = "") -> Path:
+    """gcsd.yaml with a udp-server `gcs` on `port`; `extra` goes into `log`, `tail` after `gcs`."""
     cfg = tmp_path / "gcsd.yaml"
     cfg.write_text(
         f"state_dir: {tmp_path / 'state'}\nlog: {{level: info, format: json{extra}}}\n"
-        f"channels:\n  - {{name: gcs, type: udp-server, address: '127.0.0.1:{port}'}}\n"
+        f"channels:\n  - {{name: gcs, type: udp-server, address: '127.0.0.1:{port}'}}\n{tail}"
     )
     return cfg
 
@@ -45,6 +46,15 @@ def env_with_venv(**extra: str) -> dict[str, str]:
     env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
     env.update(extra)
     return env
+
+
+def notify_socket(tmp_path: Path, timeout_s: float) -> tuple[socket.socket, Path]:
+    """The socket systemd would read: a daemon started with NOTIFY_SOCKET=its path writes to it."""
+    path = tmp_path / "notify.sock"
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(path))
+    sock.settimeout(timeout_s)
+    return sock, path
 
 
 def free_udp_port() -> int:
@@ -74,10 +84,7 @@ def test_unit_file_passes_systemd_analyze_verify():
 
 
 def test_exec_start_under_systemd_notify_sends_ready_then_watchdog_pings_then_stopping(tmp_path):
-    notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    notify_path = tmp_path / "notify.sock"
-    notify.bind(str(notify_path))
-    notify.settimeout(0.2)
+    notify, notify_path = notify_socket(tmp_path, 0.2)
     argv = unit_exec_start()
     argv[argv.index("/etc/gcsd/gcsd.yaml")] = str(write_config(tmp_path))
     proc = subprocess.Popen(
@@ -168,16 +175,8 @@ def test_ready_is_not_held_back_by_a_flight_controller_that_is_down_at_boot(tmp_
     dead.bind(("127.0.0.1", 0))
     fc_port = dead.getsockname()[1]
     dead.close()  # nothing listens there: the flight controller link cannot open
-    cfg = tmp_path / "companion.yaml"
-    cfg.write_text(
-        f"state_dir: {tmp_path / 'state'}\nlog: {{level: info, format: json}}\n"
-        f"channels:\n  - {{name: gcs, type: udp-server, address: '127.0.0.1:0'}}\n"
-        f"  - {{name: fc, type: tcp-client, address: '127.0.0.1:{fc_port}'}}\n"
-    )
-    notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    notify_path = tmp_path / "notify.sock"
-    notify.bind(str(notify_path))
-    notify.settimeout(5.0)
+    cfg = write_config(tmp_path, tail=f"  - {{name: fc, type: tcp-client, address: '127.0.0.1:{fc_port}'}}\n")
+    notify, notify_path = notify_socket(tmp_path, 5.0)
     proc = subprocess.Popen([sys.executable, "-m", "gcsd", "run", "-c", str(cfg)],
                             env=env_with_venv(NOTIFY_SOCKET=str(notify_path), WATCHDOG_USEC="600000"),
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -213,16 +212,8 @@ def test_an_http_port_another_process_holds_costs_only_the_api_until_it_is_free(
     holder.bind(("127.0.0.1", 0))
     holder.listen()
     http_port = holder.getsockname()[1]
-    cfg = tmp_path / "gcsd.yaml"
-    cfg.write_text(
-        f"state_dir: {tmp_path / 'state'}\nlog: {{level: info, format: json}}\n"
-        f"channels:\n  - {{name: gcs, type: udp-server, address: '127.0.0.1:0'}}\n"
-        f"http: {{address: '127.0.0.1:{http_port}'}}\n"
-    )
-    notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    notify_path = tmp_path / "notify.sock"
-    notify.bind(str(notify_path))
-    notify.settimeout(5.0)
+    cfg = write_config(tmp_path, tail=f"http: {{address: '127.0.0.1:{http_port}'}}\n")
+    notify, notify_path = notify_socket(tmp_path, 5.0)
     log_path = tmp_path / "gcsd.log"
     with log_path.open("wb") as log_file:
         proc = subprocess.Popen([sys.executable, "-m", "gcsd", "run", "-c", str(cfg)],
