@@ -22,6 +22,7 @@ from gcsd.signing import SigningManager
 
 from .helpers import VEHICLE, M, is_ack, tcp_channel, tcp_url, udp_channel, udp_url, wait_for
 from .test_mqtt import broker, tap, vehicle_side  # noqa: F401  (fixtures)
+from .test_signing import KEY, sign
 
 PING = M.MAVLINK_MSG_ID_PING
 
@@ -78,8 +79,10 @@ def test_a_raise_in_the_signing_check_is_counted_and_the_tcp_connection_lives_on
         return original(self, channel, frame)
 
     monkeypatch.setattr(GCS, "verify", verify)
-    d = daemon({"channels": [tcp_channel("tcp")]})
+    # a key: without one (and nothing required) every frame is accepted untouched, the check never runs
+    d = daemon({"signing": {"key": KEY.hex()}, "channels": [tcp_channel("tcp")]})
     station = client(tcp_url(d.port("tcp")))
+    sign(station, KEY)
     station.heartbeat()
     station.send(M.MAVLink_ping_message(1, 0, 0, 0))
     station.send(M.MAVLink_ping_message(2, 0, 0, 0))
