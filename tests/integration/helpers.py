@@ -16,9 +16,11 @@ from __future__ import annotations
 import os
 import select
 import socket
+import subprocess
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from pathlib import Path
 
 from pymavlink import mavutil
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
@@ -303,3 +305,36 @@ def download_params(c: Client, timeout: float = 10.0, others: Iterable[Client] =
                 c.send(M.MAVLink_param_request_read_message(*target, b"", i))
             last_new = time.monotonic()
     raise AssertionError(f"parameter download incomplete: {len(got)} of {count}")
+
+
+START_TIMEOUT_S = 30.0  # a gcsd process's start, awaited: 0.5 s alone, seconds beside 4 test workers on 2 cores
+
+
+def notify_socket(directory: Path, timeout_s: float = START_TIMEOUT_S) -> tuple[socket.socket, Path]:
+    """The socket systemd would read: a daemon started with NOTIFY_SOCKET=its path writes to it."""
+    path = directory / "notify.sock"
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(path))
+    sock.settimeout(timeout_s)
+    return sock, path
+
+
+def await_ready(notify: socket.socket, proc: subprocess.Popen, timeout_s: float = START_TIMEOUT_S) -> str:
+    """The daemon's READY=1 on its notify socket (every server channel bound, every client channel
+    tried: what systemd waits for), awaited with a generous deadline; fails at once if the
+    process exits first. The control socket is no such sign: it exists before the channels."""
+    deadline = time.monotonic() + timeout_s
+    timeout = notify.gettimeout()
+    notify.settimeout(0.1)
+    try:
+        while True:
+            try:
+                text = notify.recv(4096).decode()
+            except TimeoutError:
+                assert proc.poll() is None, f"gcsd exited at start with {proc.returncode}"
+                assert time.monotonic() < deadline, f"no READY=1 within {timeout_s} s"
+                continue
+            if text.startswith("READY=1"):
+                return text
+    finally:
+        notify.settimeout(timeout)

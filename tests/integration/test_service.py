@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 from pymavlink import mavutil
 
-from .helpers import M, pump, udp_url
+from .helpers import M, await_ready, notify_socket, pump, udp_url
 
 REPO = Path(__file__).resolve().parents[2]
 UNIT = REPO / "systemd" / "gcsd.service"
@@ -48,15 +48,6 @@ def env_with_venv(**extra: str) -> dict[str, str]:
     return env
 
 
-def notify_socket(tmp_path: Path, timeout_s: float) -> tuple[socket.socket, Path]:
-    """The socket systemd would read: a daemon started with NOTIFY_SOCKET=its path writes to it."""
-    path = tmp_path / "notify.sock"
-    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    sock.bind(str(path))
-    sock.settimeout(timeout_s)
-    return sock, path
-
-
 def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
@@ -84,55 +75,48 @@ def test_unit_file_passes_systemd_analyze_verify():
 
 
 def test_exec_start_under_systemd_notify_sends_ready_then_watchdog_pings_then_stopping(tmp_path):
-    notify, notify_path = notify_socket(tmp_path, 0.2)
+    """Every message is awaited, none timed: a start or a ping that comes late on a loaded machine
+    is no failure (Notifier's interval, half of WATCHDOG_USEC, is pinned in tests/unit/test_notify.py).
+    Pings cannot come early, so four of them spanning three intervals shows they are paced."""
+    notify, notify_path = notify_socket(tmp_path)
     argv = unit_exec_start()
     argv[argv.index("/etc/gcsd/gcsd.yaml")] = str(write_config(tmp_path))
+    interval_s = 0.3
     proc = subprocess.Popen(
-        argv, env=env_with_venv(NOTIFY_SOCKET=str(notify_path), WATCHDOG_USEC="600000"),
+        argv, env=env_with_venv(NOTIFY_SOCKET=str(notify_path), WATCHDOG_USEC=str(int(2 * interval_s * 1e6))),
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
     )
-    messages: list[tuple[float, str]] = []
     try:
-        start = time.monotonic()
-        while time.monotonic() - start < 3.0:
-            try:
-                messages.append((time.monotonic() - start, notify.recv(4096).decode()))
-            except TimeoutError:
-                pass
+        assert "1 of 1 channels open" in await_ready(notify, proc)
+        pings = [notify.recv(4096).decode() for _ in range(4)]
+        started = time.monotonic()
+        pings += [notify.recv(4096).decode() for _ in range(3)]
+        paced_s = time.monotonic() - started
         assert stop(proc) == 0
-        while True:
-            try:
-                messages.append((time.monotonic() - start, notify.recv(4096).decode()))
-            except TimeoutError:
-                break
+        after = []
+        while not after or after[-1] != "STOPPING=1":
+            after.append(notify.recv(4096).decode())
     finally:
         if proc.poll() is None:
             proc.kill()
         notify.close()
-    texts = [m for _, m in messages]
-    assert texts[0].startswith("READY=1"), texts
-    assert messages[0][0] < 2.0, "ready within 2 s of start"
-    pings = [t for t, m in messages if m == "WATCHDOG=1"]
-    assert len(pings) >= 4, f"pings every 0.3 s for WatchdogSec=0.6 s, got {len(pings)}"
-    assert texts[-1] == "STOPPING=1"
+    assert pings == ["WATCHDOG=1"] * 7, pings
+    assert paced_s >= 3 * interval_s * 0.9, f"3 pings after the 4th in {paced_s:.2f} s: not paced"
+    assert set(after[:-1]) <= {"WATCHDOG=1"}, after
 
 
 def test_status_command_shows_channels_routes_and_vehicle(tmp_path):
     port = free_udp_port()
     cfg = write_config(tmp_path, port)
+    notify, notify_path = notify_socket(tmp_path)
     proc = subprocess.Popen([sys.executable, "-m", "gcsd", "run", "-c", str(cfg)],
+                            env=env_with_venv(NOTIFY_SOCKET=str(notify_path)),
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
-        deadline = time.monotonic() + 5
-        while not (tmp_path / "state" / "gcsd.sock").exists() and time.monotonic() < deadline:
-            time.sleep(0.05)
+        await_ready(notify, proc)  # the UDP port is bound (the control socket exists before it is)
         gcs = mavutil.mavlink_connection(udp_url(port), source_system=255, source_component=190)
-        heard = None
-        for _ in range(10):  # the control socket exists a moment before the UDP port is bound
-            gcs.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-            heard = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5)
-            if heard is not None:
-                break
+        gcs.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        heard = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=10)
         gcs.close()
         assert heard is not None
         out = subprocess.run([sys.executable, "-m", "gcsd", "status", "-c", str(cfg)],
@@ -143,6 +127,7 @@ def test_status_command_shows_channels_routes_and_vehicle(tmp_path):
         assert "copter" in out.stdout and "STABILIZE" in out.stdout
     finally:
         assert stop(proc) == 0
+        notify.close()
     assert not (tmp_path / "state" / "gcsd.sock").exists(), "the control socket is removed at stop"
 
 
@@ -176,18 +161,17 @@ def test_ready_is_not_held_back_by_a_flight_controller_that_is_down_at_boot(tmp_
     fc_port = dead.getsockname()[1]
     dead.close()  # nothing listens there: the flight controller link cannot open
     cfg = write_config(tmp_path, tail=f"  - {{name: fc, type: tcp-client, address: '127.0.0.1:{fc_port}'}}\n")
-    notify, notify_path = notify_socket(tmp_path, 5.0)
+    notify, notify_path = notify_socket(tmp_path)
     proc = subprocess.Popen([sys.executable, "-m", "gcsd", "run", "-c", str(cfg)],
                             env=env_with_venv(NOTIFY_SOCKET=str(notify_path), WATCHDOG_USEC="600000"),
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
-        start = time.monotonic()
-        first = notify.recv(4096).decode()
-        ready_s = time.monotonic() - start
+        # READY while the fc is down is the proof (its link never opens, so a READY held back
+        # for it would never come); how soon it comes is the machine's load, not the daemon's rule
+        first = await_ready(notify, proc)
         second = notify.recv(4096).decode()
         # gcs open, fc down (the API's own http channel is no MAVLink channel: not counted)
-        assert first.startswith("READY=1") and "1 of 2 channels open" in first, first
-        assert ready_s < 3.0, f"READY=1 {ready_s:.1f} s after start"
+        assert "1 of 2 channels open" in first, first
         assert second == "WATCHDOG=1", "and the watchdog is fed"
         assert stop(proc) == 0
     finally:
@@ -213,15 +197,15 @@ def test_an_http_port_another_process_holds_costs_only_the_api_until_it_is_free(
     holder.listen()
     http_port = holder.getsockname()[1]
     cfg = write_config(tmp_path, tail=f"http: {{address: '127.0.0.1:{http_port}'}}\n")
-    notify, notify_path = notify_socket(tmp_path, 5.0)
+    notify, notify_path = notify_socket(tmp_path)
     log_path = tmp_path / "gcsd.log"
     with log_path.open("wb") as log_file:
         proc = subprocess.Popen([sys.executable, "-m", "gcsd", "run", "-c", str(cfg)],
                                 env=env_with_venv(NOTIFY_SOCKET=str(notify_path)),
                                 stdout=log_file, stderr=subprocess.STDOUT)
     try:
-        ready = notify.recv(4096).decode()
-        assert ready.startswith("READY=1") and "1 of 1 channels open" in ready, ready
+        ready = await_ready(notify, proc)
+        assert "1 of 1 channels open" in ready, ready
         assert f"HTTP API not listening on 127.0.0.1:{http_port}" in ready, ready
         status = _status_json(cfg)
         assert status["http"]["listening"] is None and status["http"]["error"], status["http"]
