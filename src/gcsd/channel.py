@@ -283,7 +283,7 @@ class Channel:
             if peer.admitted:  # never relay what an unknown source sent
                 for raw in bad:
                     self.on_bad_crc(self, raw)
-        verify, on_frame, tlog, in_gate = self.verify, self.on_frame, self.tlog, self.in_gate
+        verify, on_frame, tlog, in_gate = self.verify, self.on_frame, self.out.tlog, self.in_gate
         signing = self.out.signing  # without a key or `require`, every frame is accepted untouched
         checked = signing is None or signing.key is not None or signing.require
         for frame in frames:
@@ -326,35 +326,6 @@ class Channel:
         time = self.out.time
         time.now = now
         time.wall = wall
-
-    @property
-    def tlog(self):
-        return self.out.tlog
-
-    @tlog.setter
-    def tlog(self, tlog) -> None:
-        self.out.tlog = tlog  # a TlogWriter shared by all channels, when log.tlog is set
-
-    @property
-    def signing(self):
-        return self.out.signing
-
-    @signing.setter
-    def signing(self, signing) -> None:
-        self.out.signing = signing  # the process's Signing: frames are signed when it has a key
-
-    @property
-    def output_enabled(self) -> bool:
-        """False on a high-latency link until CONTROL_HIGH_LATENCY enables it (REFERENCE.md 11)."""
-        return self.out.output_enabled
-
-    @output_enabled.setter
-    def output_enabled(self, on: bool) -> None:
-        self.out.output_enabled = on
-
-    @property
-    def budget(self):
-        return self.out.budget
 
     def encoder(self, sysid: int, compid: int, mavlink1: bool = False) -> Encoder:
         return self.out.encoder(sysid, compid, mavlink1)

@@ -338,9 +338,9 @@ def channel(gcs, index: int, config: ChannelConfig) -> Channel:
     start, and for a channel added at run time: livechannels.py)."""
     ch = http_wiring.channel_class(config)(index, config, gcs.clock.now)
     ch.out.time = gcs.wake_time
-    ch.signing = gcs.signing
+    ch.out.signing = gcs.signing
     ch.wall = gcs.clock.wall
-    ch.tlog = gcs.tlog
+    ch.out.tlog = gcs.tlog
     ch.errors = gcs.errors
     ch.verify = functools.partial(gcs.verify, ch)
     ch.on_frame = gcs.on_frame

@@ -30,7 +30,7 @@ from pathlib import Path
 import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from . import __version__, compose, control
+from . import compose, control, status
 from .autopilot.core import DEFAULT_SIM_PERIOD_S
 from .boundary import ErrorCounts
 from .channel import Channel, Peer
@@ -66,7 +66,7 @@ class GCS:
         self._tried: set[int] = set()  # channels opened or, for a client, tried once
         self.ready = asyncio.Event()  # every server channel bound, every client channel tried
         self.bad_crc_forwarded = 0
-        self._rates: dict[str, tuple[float, float]] = {}
+        self.rates: dict[str, tuple[float, float]] = {}
         self.taps: list = []  # tap(channel, frame, now) of every accepted frame (compose.py)
         self.loops = RecentFrames(LOOP_WINDOW_S)  # frames forwarded lately: one coming back is a loop
         # routing.dedup_ms: every frame; else the frames of redundant link groups, within LOOP_WINDOW_S
@@ -361,7 +361,7 @@ class GCS:
         for ch in self.live.running():
             snap = ch.snapshot()
             prev = last.get(ch, snap)
-            self._rates[ch.name] = (
+            self.rates[ch.name] = (
                 (snap["packets_in"] - prev["packets_in"]) / STATS_INTERVAL_S,
                 (snap["packets_out"] - prev["packets_out"]) / STATS_INTERVAL_S,
             )
@@ -373,41 +373,11 @@ class GCS:
         return {ch.name: ch.snapshot() for ch in self.live.running()}
 
     def status(self) -> dict:
-        """Everything `gcsd status` shows (see control.py)."""
-        now = self.clock.now()
-        channels = []
-        for ch in self.live.running():
-            snap = ch.snapshot()
-            rate_in, rate_out = self._rates.get(ch.name, (0.0, 0.0))
-            address = f"{ch.local_address[0]}:{ch.local_address[1]}" if ch.local_address else (
-                ch.config.device or (ch.config.mqtt.broker if ch.config.mqtt else ""))
-            channels.append({
-                "name": ch.name, "type": ch.config.type, "address": address, "rate_in": rate_in,
-                "rate_out": rate_out, "signature_reject_reasons": dict(ch.signature_reject_reasons), **snap,
-            })
-        routes = [
-            {"sysid": r.sysid, "compid": r.compid, "channel": self.channels[r.channel].name,
-             "mavtype": r.mavtype, "age_s": now - r.last_seen_s}
-            for r in self.router.table
-        ]
-        vehicles = [
-            {"sysid": n.sysid, "compid": n.compid, "type": n.vehicle.name,
-             "mode": n.vehicle.modes.get(n.state.mode, str(n.state.mode)), "armed": n.state.armed}
-            for n in self.nodes
-        ]
-        return {"version": __version__, "uptime_s": now - self.started_s, "channels": channels,
-                "routes": routes, "vehicles": vehicles, "errors": self.errors.snapshot(),
-                "counters": self.counters(), "http": None if self.http is None else self.http.state()}
+        """Everything `gcsd status` shows (status.py, control.py)."""
+        return status.document(self)
 
     def counters(self) -> dict[str, int]:
-        """Counted events outside the channels: routing's, and every vehicle's summed."""
-        out = {"routes_not_learned": self.router.table.not_learned,
-               "unknown_ids_dropped": self.router.unknown_dropped, "bad_crc_forwarded": self.bad_crc_forwarded}
-        for node in self.nodes:
-            for name, n in node.counters().items():
-                out[name] = out.get(name, 0) + n
-        return dict(sorted(out.items()))
-
+        return status.counters(self)
 
 def _peer_name(key: object) -> str:
     return f"{key[0]}:{key[1]}" if isinstance(key, tuple) and len(key) == 2 else str(key)

@@ -27,6 +27,6 @@ class HighLatencyService(Service):
             return M.MAV_RESULT_FAILED
         for channel in self.ctx.channels:
             if "high_latency" in channel.config.options:
-                channel.output_enabled = req.param1 == 1
+                channel.out.output_enabled = req.param1 == 1
                 self.ctx.wake(channel)
         return M.MAV_RESULT_ACCEPTED

@@ -330,7 +330,7 @@ class MissionService(Service):
     @staticmethod
     def _queued_s(channel) -> float:
         """Time to transmit what the link's byte budget says is still queued (0: unlimited)."""
-        budget = channel.budget
+        budget = channel.out.budget
         return 0.0 if budget is None else channel.budget_wait_s(int(budget.capacity))
 
     # --- files -------------------------------------------------------------------------------
