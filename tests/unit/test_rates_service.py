@@ -261,3 +261,21 @@ def test_autopilot_version_request_message_pushes_autopilot_version(h):
     h.send(M.MAVLink_autopilot_version_request_message(*h_target(h)))
     h.run(1.0, step=STEP_S)
     assert len(h.of_type("AUTOPILOT_VERSION", mark)) == 1
+
+
+def test_available_modes_on_a_spent_radio_budget_are_queued_not_lost(tmp_path):
+    """REQUEST_MESSAGE(AVAILABLE_MODES) on a 57 600-baud link: a dozen modes at once are more than
+    its 100 ms of budget; every mode still arrives, after the ACK, as it refills (outbox.py)."""
+    h = Harness(tmp_path, config={"channels": [{"name": "gcs", "type": "udp-server", "address": "127.0.0.1:0",
+                                                "bandwidth": 5760}]})
+    h.run(2.0)  # the default streams run meanwhile
+    mark = h.mark()
+    h.command(M.MAV_CMD_REQUEST_MESSAGE, 435, 0)  # its ACK may itself wait for the budget
+    h.run(5.0)
+    # the harness's dialect does not know AVAILABLE_MODES (435): pymavlink names it UNKNOWN_435
+    answers = [m for m in h.received[mark:] if m.get_type() in ("COMMAND_ACK", "UNKNOWN_435")]
+    acks = [m for m in answers if m.get_type() == "COMMAND_ACK" and m.command == M.MAV_CMD_REQUEST_MESSAGE]
+    got = [m for m in answers if m.get_type() == "UNKNOWN_435"]
+    assert acks and acks[0].result == M.MAV_RESULT_ACCEPTED and answers.index(acks[0]) < answers.index(got[0])
+    assert len(got) == len(h.node.vehicle.modes), "every mode, none lost"
+    assert h.channel.snapshot()["replies_dropped"] == 0

@@ -59,6 +59,7 @@ class Harness:
     def send(self, msg, sysid: int = GCS[0], compid: int = GCS[1]) -> None:
         self._out.srcSystem, self._out.srcComponent = sysid, compid
         msg.pack(self._out)
+        self.channel.tick(self.t, self.clock.wall())  # as the transport does at each wake-up
         self.node.handle(self.channel, Frame.from_message(msg), self.t)
         self.node.send_pass(self.channel, self.t)  # what it queued (STATUSTEXT...) goes out now
 
@@ -95,6 +96,7 @@ class Harness:
         while self.t < end:
             self.t = min(end, self.t + step)
             self.node.step(self.t)  # the simulation task's tick
+            self.channel.tick(self.t, self.clock.wall())
             self.node.send_pass(self.channel, self.t)
             if until is not None and until():
                 return True

@@ -61,6 +61,6 @@ class ModesService(Service):
         return M.MAV_RESULT_ACCEPTED
 
     def pending(self, channel, now: float, send) -> float | None:
-        for msg in self.outbox.pop(channel.index, []):
-            send(msg)
+        for msg in self.outbox.pop(channel.index, []):  # after the ACK, as replies: queued, never
+            self.ctx.reply(channel, msg)  # dropped, while the link's byte budget is spent (outbox.py)
         return None
