@@ -123,7 +123,6 @@ class GcsdMachine(RuleBasedStateMachine):
         self.plans: dict[int, int | None] = {}  # mission type -> items on disk (None: unknown)
         self.sysid = 1
         self.next_sysid: set[int] = {1}
-        self.sysid_set_at = 0.0
         self.key: bytes | None = None
         self.configured_key: bytes | None = None
         self.require = False
@@ -131,7 +130,7 @@ class GcsdMachine(RuleBasedStateMachine):
         self.base_fds = 0
         self.link_ids = iter(range(1, 10_000))
         self.reads = 0
-        self.set_at: dict[str, tuple[float, set[float] | None]] = {}  # name -> (when, what it held before)
+        self.acked: list[tuple[float, str, frozenset | None]] = []  # (when, name, what it may hold before)
 
     @property
     def live(self) -> bool:
@@ -433,7 +432,8 @@ class GcsdMachine(RuleBasedStateMachine):
         self._acknowledged(name, value)
 
     def _acknowledged(self, name: str, value: float) -> None:
-        self.set_at[name] = (time.monotonic(), self.params.get(name))
+        before = self.params.get(name)
+        self.acked.append((time.monotonic(), name, None if before is None else frozenset(before)))
         self.params[name] = {f32(value)}
 
     @precondition(enabled("out_of_range_param"))
@@ -449,22 +449,24 @@ class GcsdMachine(RuleBasedStateMachine):
     def set_sysid(self, sysid: int) -> None:
         got = self._param_set("SYSID_THISMAV", float(sysid))
         assert got is not None and got.param_value == sysid, f"SYSID_THISMAV = {sysid}: {got}"
+        self.acked.append((time.monotonic(), "SYSID_THISMAV", frozenset(self.next_sysid)))
         self.next_sysid = {sysid}
-        self.sysid_set_at = time.monotonic()
 
     # --- rules: the process ----------------------------------------------------------------------
     @precondition(lambda self: self.live)
     @rule(crash=st.booleans())
     def restart(self, crash: bool) -> None:
-        if crash:  # a value acknowledged within the write-behind interval may still be the old one
-            for name, (when, before) in self.set_at.items():
-                if time.monotonic() - when < CRASH_WINDOW_S:
-                    if before is None:
-                        self.params.pop(name, None)  # the old value is not known to the test
-                    else:
-                        self.params[name] |= before
-            if time.monotonic() - self.sysid_set_at < CRASH_WINDOW_S:
-                self.next_sysid |= {self.sysid}
+        if crash:  # a value acknowledged within the write-behind interval may still be an older one
+            for when, name, before in self.acked:
+                if time.monotonic() - when >= CRASH_WINDOW_S:
+                    continue
+                if name == "SYSID_THISMAV":
+                    self.next_sysid |= before
+                elif before is None:
+                    self.params.pop(name, None)  # what it held before is not known to the test
+                elif name in self.params:
+                    self.params[name] |= before
+        self.acked.clear()
         self._restart(signal.SIGKILL if crash else signal.SIGTERM)
 
     @precondition(enabled("sighup"))
