@@ -82,8 +82,12 @@ def test_an_embedded_robot_is_driven_by_a_ground_station_through_gcsd(tmp_path, 
         gcs.command_int(M.MAV_CMD_DO_REPOSITION, 0, 0, 0, 0, round(lat * 1e7), round(lon * 1e7), 0,
                         frame=M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
         assert wait_for(gcs, is_ack(M.MAV_CMD_DO_REPOSITION), 3.0, mark).msg.result == M.MAV_RESULT_ACCEPTED
+        # the robot stops within half of WP_RADIUS (3 m) by its own flat-earth reckoning, anywhere in
+        # its last step (up to 0.3 m at 3 m/s when the loop runs late); read back as 1e-7 degree
+        # integers and measured on the sphere, that is up to 1.503 m (31 of 2000 simulated runs
+        # with steps of 40-100 ms were above 1.5, the bound this test once had)
         there = wait_for(gcs, lambda r: r.type == "GLOBAL_POSITION_INT"
-                         and distance_m(r.msg.lat / 1e7, r.msg.lon / 1e7, lat, lon) < 1.5, 15.0, mark)
+                         and distance_m(r.msg.lat / 1e7, r.msg.lon / 1e7, lat, lon) < 1.6, 15.0, mark)
         assert there is not None, "the robot never reported itself at the target"
         assert robot.last_setpoint.kind in (Kind.GOTO, Kind.HOLD)
         assert robot.odometer_m > 4.0
