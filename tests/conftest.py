@@ -10,6 +10,8 @@ connections, which is why the daemon gets its own loop.
 from __future__ import annotations
 
 import asyncio
+import fcntl
+import os
 import threading
 from pathlib import Path
 
@@ -110,5 +112,39 @@ def daemon(tmp_path: Path):
 def pytest_collection_modifyitems(config, items) -> None:
     """The tests marked slow or fault (a minute or more each, some of them) run first: under
     pytest-xdist (README's command) they then start at once on different workers, and the many
-    short tests fill in around them instead of one long test starting last and running alone."""
-    items.sort(key=lambda item: 0 if item.get_closest_marker("slow") or item.get_closest_marker("fault") else 1)
+    short tests fill in around them instead of one long test starting last and running alone.
+    The tests marked alone run last: each waits for the tests running on other workers to end."""
+    def order(item) -> int:
+        if item.get_closest_marker("alone"):
+            return 2
+        return 0 if item.get_closest_marker("slow") or item.get_closest_marker("fault") else 1
+
+    items.sort(key=order)
+
+
+@pytest.fixture(autouse=True)
+def _alone_or_together(request, tmp_path_factory):
+    """Under pytest-xdist a test marked `alone` (a real-time measurement that four tests at once on
+    two cores would distort: a round trip, a latency) runs while no other test of the run does.
+    Every test holds a shared lock while it runs, from before its own fixtures start to after
+    they end; an `alone` test takes it exclusively. A gate taken before either keeps new tests
+    from starting while an `alone` test waits, so it is not starved. Outside xdist every test
+    runs alone anyway. The lock files are in the run's shared temporary directory."""
+    if os.environ.get("PYTEST_XDIST_WORKER") is None:
+        yield
+        return
+    root = tmp_path_factory.getbasetemp().parent
+    alone = request.node.get_closest_marker("alone") is not None
+    with (root / "alone.gate").open("a") as gate, (root / "alone.lock").open("a") as lock:
+        fcntl.flock(gate, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
+        finally:
+            if not alone:
+                fcntl.flock(gate, fcntl.LOCK_UN)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+            if alone:
+                fcntl.flock(gate, fcntl.LOCK_UN)
