@@ -13,6 +13,8 @@ import itertools
 from pymavlink.dialects.v20 import ardupilotmega as M
 from vehicle_harness import Harness
 
+from gcsd.mission import MissionItem
+
 STEP_S = 0.01
 
 
@@ -56,3 +58,26 @@ def test_a_stalled_upload_backs_off_slows_the_streams_then_is_cancelled_at_8_s_a
     assert during < before / 2.5, (before, during)
     after = run(h, 2.0)
     assert rate_hz(after, "ATTITUDE", after[0][0], h.t) > before * 0.8, "the streams recover after the abort"
+
+
+def test_a_new_current_item_is_confirmed_by_mission_current_in_the_same_instant(tmp_path):
+    """MISSION_SET_CURRENT and MAV_CMD_DO_SET_MISSION_CURRENT push MISSION_CURRENT with the new
+    seq before the clock moves (its stream slot is seconds away); a refused one pushes nothing.
+    The integration test (test_mission.py) awaits the message without timing it."""
+    h = Harness(tmp_path)
+    home = MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 1)
+    takeoff = MissionItem(M.MAV_CMD_NAV_TAKEOFF, M.MAV_FRAME_GLOBAL_RELATIVE_ALT, z=20.0)
+    h.node.plans.mission.replace((home, takeoff, takeoff, takeoff, takeoff))
+    h.run(3.0)  # past the streams' first slots
+    mark = h.mark()
+    h.send(M.MAVLink_mission_set_current_message(1, 1, 3))
+    assert [m.seq for m in h.of_type("MISSION_CURRENT", mark)] == [3]
+    mark = h.mark()
+    assert h.command(M.MAV_CMD_DO_SET_MISSION_CURRENT, 2) == M.MAV_RESULT_ACCEPTED
+    assert [m.seq for m in h.of_type("MISSION_CURRENT", mark)] == [2]
+    mark = h.mark()
+    assert h.command(M.MAV_CMD_DO_SET_MISSION_CURRENT, 5) == M.MAV_RESULT_DENIED  # out of range
+    h.send(M.MAVLink_mission_set_current_message(1, 1, 9))
+    assert h.of_type("MISSION_CURRENT", mark) == []
+    h.run(5.0)
+    assert h.of_type("MISSION_CURRENT", mark), "the control: the stream itself sends it"
