@@ -136,7 +136,13 @@ def test_a_serial_device_removed_and_recreated_under_the_same_link_is_opened_aga
     assert _poll(lambda: _channel(d, "fc")["peers"] == 0, 5.0), "the daemon never saw the device go"
     ptys.append(LinkedPty(link))  # plugged in again: a new tty behind the same link
     assert _answered(ptys[1], 10.0), "the device was not opened again"
-    assert _channel(d, "fc")["peers"] == 1
+    # The vehicle's HEARTBEAT proves the device is open; our own may have been read a moment later.
+    assert _poll(lambda: _heard(ptys[1], d), 5.0), "the flight controller's side was not admitted as a peer"
+
+
+def _heard(p: LinkedPty, d) -> bool:
+    p.send(HEARTBEAT)
+    return _channel(d, "fc")["peers"] == 1
 
 
 def test_a_serial_device_missing_at_start_is_opened_when_it_appears(daemon, ptys, tmp_path):
