@@ -305,7 +305,7 @@ class Channel:
                 if in_gate is not None and not in_gate.allow(frame):
                     continue  # filter.in: after the signature check, before routing and local handling
                 on_frame(self, frame, now)
-            except Exception:
+            except Exception:  # noqa: BLE001  (one frame's failure must not end the batch or the connection)
                 self.errors.failed("receive", now, channel=self.name, msg=frame.name, sysid=frame.sysid)
 
     def _spoofed(self, parser: FrameParser, frames: list[Frame], source_sysid: int) -> bool:

@@ -243,7 +243,7 @@ class GCS:
             if due[index] <= now:
                 try:
                     d = node.send_pass(channel, now)
-                except Exception:
+                except Exception:  # noqa: BLE001  (one vehicle's send pass must not stop the channel's)
                     self.errors.failed("send_pass", now, channel=channel.name, sysid=node.sysid)
                     d = None
                 due[index] = d if d is not None else now + IDLE_NODE_PASS_S
