@@ -18,7 +18,6 @@ device" answers (services/peripherals.py), and compose.OVERRIDES says who wins w
 from __future__ import annotations
 
 from .autopilot.settings import Behaviour
-from .camera.service import CameraService
 from .gimbal.params import with_mount_params
 from .gimbal.service import GimbalService
 from .gimbal.telemetry import gimbal_producers
@@ -46,6 +45,8 @@ def gimbal_service(node, w):
 def camera_service(node, w):
     if not w.config.vehicle.camera:
         return None
+    # Pillow (JPEG and EXIF) is loaded only when a camera is configured
+    from .camera.service import CameraService
     service = CameraService(node, node.state_dir / w.config.ftp.root, node.now(), w.services.get("gimbal"))
     node.autopilot.payload_items.update(service.mission_items())
     return service
