@@ -140,6 +140,11 @@ def test_a_serial_device_removed_and_recreated_under_the_same_link_is_opened_aga
     assert _poll(lambda: _heard(ptys[1], d), 5.0), "the flight controller's side was not admitted as a peer"
 
 
+def _accepted(p: LinkedPty, d) -> bool:
+    p.send(HEARTBEAT)
+    return _channel(d, "fc")["packets_in"] >= 1
+
+
 def _heard(p: LinkedPty, d) -> bool:
     p.send(HEARTBEAT)
     return _channel(d, "fc")["peers"] == 1
@@ -157,11 +162,14 @@ def test_a_baud_list_is_cycled_until_a_good_frame_and_then_kept(daemon, ptys, tm
     link = str(tmp_path / "usb-radio")
     p = LinkedPty(link)
     ptys.append(p)
-    daemon({"channels": [{"name": "fc", "type": "serial", "device": link, "baud": [921600, 57600]}]})
+    d = daemon({"channels": [{"name": "fc", "type": "serial", "device": link, "baud": [921600, 57600]}]})
     assert p.speed() == termios.B921600
     # the "flight controller" speaks only 57600: nothing good reaches the daemon until it moves there
     assert _poll(lambda: p.speed() == termios.B57600, 5.0), "the daemon never tried the second baud"
     assert _answered(p, 3.0)
+    # The vehicle's HEARTBEAT may precede the daemon reading ours (pyserial flushes the input when it
+    # opens, after setting the speed): a frame of ours is awaited, as a 1 Hz flight controller's would be.
+    assert _poll(lambda: _accepted(p, d), 1.5), "no frame of ours was accepted at 57600"
     time.sleep(2.5)  # longer than a probe: a locked baud stays
     assert p.speed() == termios.B57600
     p.raw.clear()
