@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from pymavlink.generator.mavcrc import x25crc
 
+from . import speedups
+
 try:  # fastcrc is a dependency; the fallback keeps a broken install correct, only slower
     from fastcrc.crc16 import mcrf4xx as _mcrf4xx
 
@@ -180,86 +182,96 @@ class FrameParser:
         return dropped
 
     def feed(self, data: bytes) -> list[Frame]:
-        stats = self.stats
-        stats.bytes += len(data)
-        buf = self._buf + data if self._buf else bytes(data)
-        n = len(buf)
-        i = 0
-        frames: list[Frame] = []
-        info_of = MESSAGE_INFO.get
-        while i < n:
-            stx = buf[i]
-            if stx != STX_V2 and stx != STX_V1:
-                j = _next_stx(buf, i + 1)
+        return _feed(self, data)
+
+
+def feed_python(parser: FrameParser, data: bytes) -> list[Frame]:
+    """FrameParser.feed in Python: the reference of the compiled one (gcsd.speedups)."""
+    stats = parser.stats
+    stats.bytes += len(data)
+    buf = parser._buf + data if parser._buf else bytes(data)
+    n = len(buf)
+    i = 0
+    frames: list[Frame] = []
+    info_of = MESSAGE_INFO.get
+    while i < n:
+        stx = buf[i]
+        if stx != STX_V2 and stx != STX_V1:
+            j = _next_stx(buf, i + 1)
+            stats.parse_errors += 1
+            i = j
+            continue
+        if stx == STX_V2:
+            if n - i < 10:
+                break
+            plen = buf[i + 1]
+            flags = buf[i + 2]
+            if flags & ~mavlink.MAVLINK_IFLAG_SIGNED:
                 stats.parse_errors += 1
-                i = j
+                i += 1
                 continue
-            if stx == STX_V2:
-                if n - i < 10:
-                    break
-                plen = buf[i + 1]
-                flags = buf[i + 2]
-                if flags & ~mavlink.MAVLINK_IFLAG_SIGNED:
-                    stats.parse_errors += 1
-                    i += 1
-                    continue
-                hlen = 10
-                total = plen + 12 + (13 if flags else 0)
-                if n - i < total:
-                    break
-                seq, sysid, compid = buf[i + 4], buf[i + 5], buf[i + 6]
-                msgid = buf[i + 7] | (buf[i + 8] << 8) | (buf[i + 9] << 16)
-                version = 2
-            else:
-                if n - i < 6:
-                    break
-                plen = buf[i + 1]
-                hlen = 6
-                total = plen + 8
-                if n - i < total:
-                    break
-                seq, sysid, compid, msgid = buf[i + 2], buf[i + 3], buf[i + 4], buf[i + 5]
-                version = 1
-            raw = buf[i:i + total]
-            info = info_of(msgid)
-            if info is None:
-                stats.unknown_ids += 1
-                frame = Frame(raw, msgid, sysid, compid, seq, version, False)
-            else:
-                crc_end = hlen + plen
-                crc = _crc16(raw[1:crc_end] + bytes((info.crc_extra,)))
-                if crc != raw[crc_end] | (raw[crc_end + 1] << 8):
-                    stats.crc_errors += 1
-                    if self._keep_bad_crc:
-                        self.bad_crc_frames.append(raw)
-                    i += 1  # resync: the real frame may start inside this one
-                    continue
-                ts_ofs, tc_ofs = info.target_system_ofs, info.target_component_ofs
-                ts = tc = -1
-                if ts_ofs >= 0:
-                    ts = raw[hlen + ts_ofs] if ts_ofs < plen else 0
-                if tc_ofs >= 0:
-                    tc = raw[hlen + tc_ofs] if tc_ofs < plen else 0
-                frame = Frame(raw, msgid, sysid, compid, seq, version, True, ts, tc)
-            stats.frames += 1
-            key = (sysid, compid)
-            entry = stats.last_seq.get(key)
-            if entry is not None:
-                gap = (seq - entry[0] - 1) & 0xFF
-                stats.seq_gaps += gap
-                entry[0] = seq
-                entry[1] += 1
-                if gap < MAX_GAP:
-                    entry[2] += gap
-                if entry[1] >= LOSS_WINDOW:
-                    entry[1] >>= 1
-                    entry[2] >>= 1
-            elif len(stats.last_seq) < MAX_SOURCES_TRACKED:
-                stats.last_seq[key] = [seq, 1, 0]
-            frames.append(frame)
-            i += total
-        self._buf = buf[i:] if i < n else b""
-        return frames
+            hlen = 10
+            total = plen + 12 + (13 if flags else 0)
+            if n - i < total:
+                break
+            seq, sysid, compid = buf[i + 4], buf[i + 5], buf[i + 6]
+            msgid = buf[i + 7] | (buf[i + 8] << 8) | (buf[i + 9] << 16)
+            version = 2
+        else:
+            if n - i < 6:
+                break
+            plen = buf[i + 1]
+            hlen = 6
+            total = plen + 8
+            if n - i < total:
+                break
+            seq, sysid, compid, msgid = buf[i + 2], buf[i + 3], buf[i + 4], buf[i + 5]
+            version = 1
+        raw = buf[i:i + total]
+        info = info_of(msgid)
+        if info is None:
+            stats.unknown_ids += 1
+            frame = Frame(raw, msgid, sysid, compid, seq, version, False)
+        else:
+            crc_end = hlen + plen
+            crc = _crc16(raw[1:crc_end] + bytes((info.crc_extra,)))
+            if crc != raw[crc_end] | (raw[crc_end + 1] << 8):
+                stats.crc_errors += 1
+                if parser._keep_bad_crc:
+                    parser.bad_crc_frames.append(raw)
+                i += 1  # resync: the real frame may start inside this one
+                continue
+            ts_ofs, tc_ofs = info.target_system_ofs, info.target_component_ofs
+            ts = tc = -1
+            if ts_ofs >= 0:
+                ts = raw[hlen + ts_ofs] if ts_ofs < plen else 0
+            if tc_ofs >= 0:
+                tc = raw[hlen + tc_ofs] if tc_ofs < plen else 0
+            frame = Frame(raw, msgid, sysid, compid, seq, version, True, ts, tc)
+        stats.frames += 1
+        key = (sysid, compid)
+        entry = stats.last_seq.get(key)
+        if entry is not None:
+            gap = (seq - entry[0] - 1) & 0xFF
+            stats.seq_gaps += gap
+            entry[0] = seq
+            entry[1] += 1
+            if gap < MAX_GAP:
+                entry[2] += gap
+            if entry[1] >= LOSS_WINDOW:
+                entry[1] >>= 1
+                entry[2] >>= 1
+        elif len(stats.last_seq) < MAX_SOURCES_TRACKED:
+            stats.last_seq[key] = [seq, 1, 0]
+        frames.append(frame)
+        i += total
+    parser._buf = buf[i:] if i < n else b""
+    return frames
+
+
+_feed = speedups.compiled_feed(Frame, {
+    msgid: (info.crc_extra, info.target_system_ofs, info.target_component_ofs) for msgid, info in MESSAGE_INFO.items()
+}) or feed_python
 
 
 def _next_stx(buf: bytes, start: int) -> int:

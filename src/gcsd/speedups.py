@@ -1,0 +1,64 @@
+"""The compiled fast path (gcsd._speedups, C) and the pure-Python code it stands in for.
+
+What a routed datagram costs is mostly interpreter work per packet (issue 19; bench/RESULTS.md):
+one Python-level `recvfrom` per datagram and one more that raises at the end of each drain, and
+the byte loop of the frame parser. The C module does those two things:
+
+- `recv_batch(sock, n)`: up to n waiting datagrams of a UDP socket, as [(bytes, (host, port))],
+  in one `recvmmsg(2)`; [] when none waits. An error on the first datagram (an ICMP port
+  unreachable from an earlier send, say) raises OSError; one after it is left for the next call.
+- `feed(parser, data)`: codec.FrameParser.feed (codec.feed_python is its reference).
+
+It is optional: `setup.py` builds it when a C compiler is there (`optional=True`) and gcsd runs
+the same code in Python when it is not, or when GCSD_PURE_PYTHON is set (to compare, or to rule
+it out). `IMPLEMENTATION` says which one runs; `gcsd status --json` shows it. Both are tested
+against each other (tests/unit/test_speedups.py, tests/unit/test_codec.py). The compiled
+recv_batch reads IPv4 sockets only; an IPv6 channel uses the Python one.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+from collections.abc import Callable
+
+try:
+    if os.environ.get("GCSD_PURE_PYTHON"):
+        raise ImportError("GCSD_PURE_PYTHON is set")
+    from . import _speedups as compiled
+except ImportError:
+    compiled = None
+
+IMPLEMENTATION = "c" if compiled is not None else "python"
+MAX_DATAGRAM = 65536
+
+
+def recv_batch_python(sock: socket.socket, n: int) -> list[tuple[bytes, tuple]]:
+    out: list[tuple[bytes, tuple]] = []
+    recvfrom = sock.recvfrom
+    for _ in range(n):
+        try:
+            out.append(recvfrom(MAX_DATAGRAM))
+        except (BlockingIOError, InterruptedError):
+            break
+        except OSError:
+            if not out:
+                raise
+            break
+    return out
+
+
+def receiver(sock: socket.socket) -> Callable[[socket.socket, int], list[tuple[bytes, tuple]]]:
+    """The recv_batch for this socket: the compiled one for IPv4, else the Python one."""
+    if compiled is not None and sock.family == socket.AF_INET:
+        return compiled.recv_batch
+    return recv_batch_python
+
+
+def compiled_feed(frame_type: type, infos: dict[int, tuple[int, int, int]]):
+    """The compiled FrameParser.feed, set up with the Frame class and the dialect's table
+    {msgid: (crc_extra, target_system_ofs, target_component_ofs)}; None without the module."""
+    if compiled is None:
+        return None
+    compiled.setup(frame_type, infos)
+    return compiled.feed
