@@ -151,17 +151,28 @@ def gcsd_env(src_dir: Path | None) -> dict | None:
 
 
 def export_gcsd_rev(repo: Path, rev: str, dest: Path) -> tuple[Path, str]:
-    """``git archive REV src`` into dest; returns (the src directory to import from, a description:
-    REV's short commit and, if different, the last commit at or before it that changed src/)."""
+    """``git archive REV src`` into dest, with gcsd._speedups built in place when REV has setup.py
+    and a compiler is there (as ``pip install -e .`` would); returns (the src directory to import
+    from, a description: REV's short commit, the last commit at or before it that changed src/ if
+    different, and whether the compiled packet path is in)."""
     commit = subprocess.run(["git", "rev-parse", "--short", rev], cwd=repo, capture_output=True, text=True,
                             check=True).stdout.strip()
     src_commit = subprocess.run(["git", "log", "-1", "--format=%h", commit, "--", "src"], cwd=repo,
                                 capture_output=True, text=True, check=True).stdout.strip()
+    has_setup = subprocess.run(["git", "cat-file", "-e", f"{commit}:setup.py"], cwd=repo,
+                               capture_output=True, check=False).returncode == 0
     dest.mkdir(parents=True, exist_ok=True)
-    archive = subprocess.run(["git", "archive", "--format=tar", commit, "src"], cwd=repo, capture_output=True,
+    paths = ["src", "setup.py", "pyproject.toml", "README.md"] if has_setup else ["src"]
+    archive = subprocess.run(["git", "archive", "--format=tar", commit, *paths], cwd=repo, capture_output=True,
                              check=True).stdout
     subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
-    return dest / "src", commit if src_commit in ("", commit) else f"{commit} (src/ as of {src_commit})"
+    what = commit if src_commit in ("", commit) else f"{commit} (src/ as of {src_commit})"
+    if has_setup:
+        built = subprocess.run([sys.executable, "setup.py", "-q", "build_ext", "--inplace"], cwd=dest,
+                               capture_output=True, check=False)
+        compiled = built.returncode == 0 and any((dest / "src" / "gcsd").glob("_speedups*.so"))
+        what += ", gcsd._speedups compiled" if compiled else ", pure Python (gcsd._speedups not built)"
+    return dest / "src", what
 
 
 def gcsd_available(env: dict | None = None) -> tuple[bool, str]:

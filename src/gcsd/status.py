@@ -1,11 +1,13 @@
 """What `gcsd status` shows of a running daemon (control.py serves it, formats it as tables):
 its channels (counters, packet rates over the last statistics interval, signing rejects by
 reason), learned routes, vehicles, the exceptions caught per component (`errors`), the counted
-events outside the channels (`counters`) and the HTTP API's state."""
+events outside the channels (`counters`), the HTTP API's state, and what runs the packet path
+(`runtime`: the event loop, and whether gcsd._speedups is compiled in: speedups.py)."""
 
 from __future__ import annotations
 
-from . import __version__
+from . import __version__, speedups
+from .loop import loop_name
 
 
 def document(gcs) -> dict:
@@ -30,7 +32,8 @@ def document(gcs) -> dict:
          "mode": n.vehicle.modes.get(n.state.mode, str(n.state.mode)), "armed": n.state.armed}
         for n in gcs.nodes
     ]
-    return {"version": __version__, "uptime_s": now - gcs.started_s, "channels": channels,
+    return {"version": __version__, "uptime_s": now - gcs.started_s,
+            "runtime": {"loop": loop_name(), "speedups": speedups.IMPLEMENTATION}, "channels": channels,
             "routes": routes, "vehicles": vehicles, "errors": gcs.errors.snapshot(),
             "counters": counters(gcs), "http": None if gcs.http is None else gcs.http.state()}
 

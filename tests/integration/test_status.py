@@ -15,6 +15,9 @@ from pathlib import Path
 import pytest
 from pymavlink import mavutil
 
+from gcsd import speedups
+from gcsd.loop import loop_name
+
 from .helpers import M, udp_url
 
 REPO = Path(__file__).resolve().parents[2]
@@ -65,6 +68,7 @@ def test_status_from_another_directory_finds_the_daemon_by_its_file_or_its_regis
                      "state_dir": str(tmp_path / "a" / "state"), "config": str(config)}
     status = json.loads(gcsd("status", "-c", str(config), "--json", cwd=elsewhere, env=env).stdout)
     port = int(status["channels"][0]["address"].rsplit(":", 1)[1])
+    assert status["runtime"] == {"loop": loop_name(), "speedups": speedups.IMPLEMENTATION}
     gcs = mavutil.mavlink_connection(udp_url(port), source_system=255, source_component=190)
     try:
         gcs.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
