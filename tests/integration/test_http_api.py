@@ -209,7 +209,7 @@ def test_mission_plan_round_trip_and_bad_plans(api):
 
     _, url, gcs = api
     status, _, body, _ = call(f"{url}/v1/vehicles/1/mission", "PUT", QGC_PLAN)
-    assert (status, body) == (200, {"items": 3})
+    assert (status, body) == (200, {"items": 3, "fence": 0, "rally": 0})
     plan = call(f"{url}/v1/vehicles/1/mission")[2]
     items = plan["mission"]["items"]
     assert [i["command"] for i in items] == [22, 16, 178]

@@ -31,7 +31,7 @@ QGC_PLAN = {
 
 
 def test_qgc_plan_becomes_items_with_degE7_and_nan():
-    items = from_plan(QGC_PLAN)
+    items = from_plan(QGC_PLAN).mission
     assert [i.command for i in items] == [22, 16, 178]
     assert (items[1].x, items[1].y, items[1].z) == (-353625000, 1491655000, 30.0)
     assert math.isnan(items[1].param4)
@@ -39,12 +39,12 @@ def test_qgc_plan_becomes_items_with_degE7_and_nan():
 
 
 def test_items_become_a_plan_that_reads_back_the_same():
-    items = from_plan(QGC_PLAN)
+    items = from_plan(QGC_PLAN).mission
     plan = to_plan((HOME, *items), HOME, M.MAV_TYPE_QUADROTOR)
     assert plan["mission"]["plannedHomePosition"] == [-35.3632621, 149.1652374, 584.0]
     assert [e["doJumpId"] for e in plan["mission"]["items"]] == [1, 2, 3]
     assert plan["mission"]["items"][1]["params"][3] is None  # NaN as QGC writes it
-    again = from_plan(plan)
+    again = from_plan(plan).mission
     assert [(i.command, i.frame, i.x, i.y, i.z) for i in again] == [(i.command, i.frame, i.x, i.y, i.z) for i in items]
 
 
@@ -57,7 +57,8 @@ def test_items_become_a_plan_that_reads_back_the_same():
     (lambda p: p["mission"]["items"][0]["params"].__setitem__(4, None), "x and y"),
     (lambda p: p["mission"]["items"][0]["params"].__setitem__(0, "a"), r"params\[0\]"),
     (lambda p: p["mission"]["items"][0].update(autoContinue=1), "autoContinue"),
-    (lambda p: p["rallyPoints"].update(points=[[1, 2, 3]]), "only the mission"),
+    (lambda p: p["mission"]["items"][0]["params"].__setitem__(6, 1e39), "32-bit float"),
+    (lambda p: p["mission"]["items"][0]["params"].__setitem__(0, float("inf")), "32-bit float"),
     (lambda p: p["mission"].update(items={}), "a list"),
 ])
 def test_bad_plans_say_where(change, error):

@@ -156,17 +156,26 @@ class VehicleFace:
         return now
 
     def mission(self) -> dict:
-        items = self.node.plans.read_plan(M.MAV_MISSION_TYPE_MISSION) or ()
+        plans = self.node.plans
+        items = plans.read_plan(M.MAV_MISSION_TYPE_MISSION) or ()
         home = home_item(self.node.state)
-        return to_plan(tuple(items) if items else (home,), home, self.node.vehicle.mav_type)
+        return to_plan(tuple(items) if items else (home,), home, self.node.vehicle.mav_type,
+                       plans.read_plan(M.MAV_MISSION_TYPE_FENCE), plans.read_plan(M.MAV_MISSION_TYPE_RALLY))
 
-    def put_mission(self, document: object) -> int:
-        items = from_plan(document)
-        plan = [home_item(self.node.state), *items] if items else []
-        result = self.node.plans.write_plan(M.MAV_MISSION_TYPE_MISSION, plan)
-        if result != M.MAV_MISSION_ACCEPTED:
-            raise PlanError(f"refused: {M.enums['MAV_MISSION_RESULT'][result].name}")
-        return len(items)
+    def put_mission(self, document: object) -> dict:
+        """The plan's mission, fence and rally, all or none (PlanError / RequestFailed if none)."""
+        plan = from_plan(document)
+        writes = {M.MAV_MISSION_TYPE_MISSION: (home_item(self.node.state), *plan.mission) if plan.mission else ()}
+        if plan.fence is not None:
+            writes[M.MAV_MISSION_TYPE_FENCE] = plan.fence
+        if plan.rally is not None:
+            writes[M.MAV_MISSION_TYPE_RALLY] = plan.rally
+        written = self.node.plans.write_plans(writes)
+        if written.result != M.MAV_MISSION_ACCEPTED:
+            raise _refusal(written)
+        counts = {"items": len(plan.mission)}
+        counts.update({k: len(v) for k, v in (("fence", plan.fence), ("rally", plan.rally)) if v is not None})
+        return counts
 
     def mode_names(self) -> list[str]:
         return list(self.node.vehicle.modes.values())
@@ -184,3 +193,20 @@ class VehicleFace:
         ack = await self.face.ask(node, msg, lambda m: m.get_type() == "COMMAND_ACK" and m.command == command)
         if ack.result != M.MAV_RESULT_ACCEPTED:
             raise RequestFailed(409, f"{M.enums['MAV_CMD'][command].name}: {M.enums['MAV_RESULT'][ack.result].name}")
+
+
+_PART = {M.MAV_MISSION_TYPE_MISSION: ("mission", "mission.max_items, home included"),
+         M.MAV_MISSION_TYPE_FENCE: ("geoFence", "mission.max_fence: polygon vertices, circles, return point"),
+         M.MAV_MISSION_TYPE_RALLY: ("rallyPoints", "mission.max_rally")}
+
+
+def _refusal(written) -> Exception:
+    """A refused write as the HTTP answer: 409 while a ground station uploads, else 422."""
+    part, limit_key = _PART[written.refused_type]
+    if written.result == M.MAV_MISSION_DENIED:
+        return RequestFailed(409, f"{part}: {written.reason}; nothing changed, try again")
+    if written.result == M.MAV_MISSION_NO_SPACE:
+        return PlanError(f"{part}: too many items for the vehicle, at most {written.limit} ({limit_key}); "
+                         "nothing changed")
+    home = " (item 0 is home)" if written.refused_type == M.MAV_MISSION_TYPE_MISSION else ""
+    return PlanError(f"{part} refused, nothing changed: {written.reason}{home}")

@@ -9,24 +9,35 @@ null. The mission's item 0 is home (plannedHomePosition); the plan's items becom
 
 x and y are degrees for a command with a location in a global frame (stored as degE7, as
 MISSION_ITEM_INT carries them) and plain parameters otherwise (stored as integers, as
-gcsd.mission.items keeps them). Reading is strict: a complex item (survey, corridor scan), a
-non-empty geoFence or rallyPoints, a missing or mistyped key raises `PlanError` with where it
-is, and nothing is changed; the store's own upload checks (gcsd.mission.stores) come after.
+gcsd.mission.items keeps them). The geoFence and rallyPoints are gcsd.http.planfence's; a plan
+without one of them (QGC always writes both) leaves that plan of the vehicle as it is.
+
+Reading is strict: a complex item (survey, corridor scan), a missing or mistyped key, a number
+beyond a 32-bit float (it would go out as infinity) raises `PlanError` with where it is, and
+nothing is changed; the stores' own upload checks (gcsd.mission.stores) come after, for the
+three plans together (gcsd.mission.together).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..mission.items import GLOBAL_FRAMES, MissionItem, has_location
+from .planfence import FLOAT32_MAX, PlanError, fence_items, fence_json, rally_items, rally_json
 
 FIRMWARE_ARDUPILOT = M.MAV_AUTOPILOT_ARDUPILOTMEGA
+Items = tuple[MissionItem, ...]
+__all__ = ["Plan", "PlanError", "from_plan", "to_plan"]
 
 
-class PlanError(ValueError):
-    """The document is not a .plan version 2 gcsd can take (422)."""
+@dataclass(frozen=True, slots=True)
+class Plan:
+    mission: Items  # the items after home
+    fence: Items | None  # None: the document has no geoFence (the vehicle's stays)
+    rally: Items | None
 
 
 def _number(value: float) -> float | None:
@@ -39,8 +50,8 @@ def _xy_out(item: MissionItem) -> tuple[float, float]:
     return float(item.x), float(item.y)
 
 
-def to_plan(items: tuple[MissionItem, ...], home: MissionItem, vehicle_type: int) -> dict:
-    """The mission (item 0 = home, then the plan) as a QGroundControl .plan."""
+def to_plan(items: Items, home: MissionItem, vehicle_type: int, fence: Items = (), rally: Items = ()) -> dict:
+    """The mission (item 0 = home, then the plan), fence and rally as a QGroundControl .plan."""
     entries = []
     for n, item in enumerate(items[1:], start=1):
         x, y = _xy_out(item)
@@ -53,8 +64,8 @@ def to_plan(items: tuple[MissionItem, ...], home: MissionItem, vehicle_type: int
         "fileType": "Plan",
         "groundStation": "gcsd",
         "version": 1,
-        "geoFence": {"circles": [], "polygons": [], "version": 2},
-        "rallyPoints": {"points": [], "version": 2},
+        "geoFence": fence_json(fence),
+        "rallyPoints": rally_json(rally),
         "mission": {
             "version": 2,
             "firmwareType": FIRMWARE_ARDUPILOT,
@@ -67,8 +78,8 @@ def to_plan(items: tuple[MissionItem, ...], home: MissionItem, vehicle_type: int
     }
 
 
-def from_plan(document: object) -> list[MissionItem]:
-    """The plan's mission items (without home). Raises PlanError."""
+def from_plan(document: object) -> Plan:
+    """The plan's mission items (without home), fence and rally items. Raises PlanError."""
     if not isinstance(document, dict) or document.get("fileType") != "Plan":
         raise PlanError('not a QGroundControl plan (expected "fileType": "Plan")')
     mission = document.get("mission")
@@ -76,15 +87,13 @@ def from_plan(document: object) -> list[MissionItem]:
         raise PlanError("mission: expected an object")
     if mission.get("version") != 2:
         raise PlanError(f"mission.version: {mission.get('version')!r}, only version 2 is read")
-    for key, inner in (("geoFence", "polygons"), ("geoFence", "circles"), ("rallyPoints", "points")):
-        part = document.get(key) or {}
-        if not isinstance(part, dict) or part.get(inner):
-            raise PlanError(f"{key}.{inner}: only the mission is taken here; send fences and rally points "
-                            "over MAVLink or FTP")
     raw_items = mission.get("items")
     if not isinstance(raw_items, list):
         raise PlanError("mission.items: expected a list")
-    return [_item(raw, f"mission.items[{n}]") for n, raw in enumerate(raw_items)]
+    items = tuple(_item(raw, f"mission.items[{n}]") for n, raw in enumerate(raw_items))
+    fence = fence_items(document["geoFence"]) if "geoFence" in document else None
+    rally = rally_items(document["rallyPoints"]) if "rallyPoints" in document else None
+    return Plan(items, fence, rally)
 
 
 def _item(raw: object, where: str) -> MissionItem:
@@ -109,6 +118,8 @@ def _item(raw: object, where: str) -> MissionItem:
             values.append(math.nan)
         elif isinstance(p, bool) or not isinstance(p, (int, float)):
             raise PlanError(f"{where}.params[{i}]: expected a number or null")
+        elif not abs(p) <= FLOAT32_MAX:  # infinity too (1e999 in JSON)
+            raise PlanError(f"{where}.params[{i}]: {p!r} is beyond a 32-bit float")
         else:
             values.append(float(p))
     x, y = values[4], values[5]

@@ -14,19 +14,20 @@ Routes (each mavlink2rest route is also served without `/v1`, as mavlink2rest do
   GET  /v1/status                  `gcsd status --json`'s document
   GET  /v1/ws/status               WebSocket: the same document every second (gcsd.http.statuspage)
   GET  /v1/vehicles/{sysid}/parameters[/{NAME}], PUT .../parameters/{NAME} {"value": n}
-  GET/PUT /v1/vehicles/{sysid}/mission   a QGroundControl .plan (gcsd.http.plan)
+  GET/PUT /v1/vehicles/{sysid}/mission   a QGroundControl .plan: mission, geoFence, rallyPoints
+                                   (gcsd.http.plan, planfence); PUT answers the item counts
   POST /v1/vehicles/{sysid}/mode {"mode": NAME}, .../arm {}, .../disarm {}
   GET  /v1/logs, /v1/logs/{id}[?sysid=S]   the flight logs (gcsd.logs.listing), one log's file
   GET  /, /favicon.ico             the status page (gcsd.http.statuspage)
 
 Errors are JSON `{"error": "..."}`: 400 malformed JSON or a bad message, 404 an unknown route,
 path, message name, vehicle or parameter, 405 a wrong method, 413 a body over MAX_BODY_BYTES,
-422 a value of the wrong type or range, an unknown mode or a bad plan, 409 a command the vehicle
-refused, 503 beyond MAX_WEBSOCKETS WebSocket clients, 504 no answer from a vehicle. An exception
-in a handler is counted (`http` in the daemon's
-error counts) and answered 500; the daemon goes on. With `http.token_file`, every request but the
-favicon needs `Authorization: Bearer TOKEN` or `?token=TOKEN` (a browser's WebSocket cannot set
-headers); without it: 401 with `WWW-Authenticate: Bearer`. CORS is permissive, as mavlink2rest's.
+422 a value of the wrong type or range, an unknown mode or a bad plan (nothing of it stored), 409
+a command the vehicle refused or a plan while a ground station uploads that type, 503 beyond
+MAX_WEBSOCKETS WebSocket clients, 504 no answer from a vehicle. An exception in a handler is
+counted (`http` in the daemon's error counts) and answered 500; the daemon goes on. With
+`http.token_file`, every request but the favicon needs `Authorization: Bearer TOKEN` or
+`?token=TOKEN` (a browser's WebSocket cannot set headers); without it: 401 with `WWW-Authenticate: Bearer`. CORS is permissive, as mavlink2rest's.
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ class Vehicle(Protocol):
     def parameter(self, name: str) -> dict | None: ...
     async def set_parameter(self, name: str, value: float) -> dict: ...
     def mission(self) -> dict: ...
-    def put_mission(self, document: object) -> int: ...
+    def put_mission(self, document: object) -> dict[str, int]: ...
     def mode_names(self) -> list[str]: ...
     async def set_mode(self, name: str) -> None: ...
     async def arm(self, armed: bool) -> None: ...
@@ -314,10 +315,10 @@ async def mission_put(request: web.Request) -> web.Response:
     vehicle = _vehicle(request)
     document = await read_json(request)
     try:
-        count = vehicle.put_mission(document)
+        counts = vehicle.put_mission(document)
     except PlanError as exc:
         raise RequestFailed(422, str(exc)) from None
-    return _json({"items": count})
+    return _json(counts)
 
 
 async def mode(request: web.Request) -> web.Response:

@@ -228,32 +228,43 @@ class MissionTransfer:
         try:
             self.store.replace(())
         except OSError as exc:
-            return ERROR, [self._save_failed(exc)]
+            return ERROR, [self.save_failed(exc)]
         return ACCEPTED, [PlanChanged(self.mission_type, self.store.count())]
 
-    # --- whole plans from elsewhere (FTP @MISSION/*.dat) -------------------------------------
-    def write_plan(self, items, now: float) -> tuple[int, list[Output]]:
-        """Replace the whole plan at once, with every check an upload makes: DENIED while an
-        upload is in progress, NO_SPACE above the limit, an item's own result, ERROR (with the
-        reason as text) for a plan invalid as a whole or not saved. Returns (result, outputs)."""
-        items = tuple(items)
+    # --- whole plans from elsewhere (FTP @MISSION/*.dat, the HTTP .plan) ---------------------
+    def check_write(self, items: tuple[MissionItem, ...]) -> tuple[int, str | None]:
+        """Every check an upload makes, nothing changed: (ACCEPTED, None) or (result, why):
+        DENIED while an upload is in progress, NO_SPACE above the limit, an item's own result,
+        ERROR for a plan invalid as a whole."""
         if self._upload is not None:
-            return DENIED, []
+            return DENIED, f"{self.store.label}: a ground station is uploading one now"
         if len(items) > self.store.max_items:
-            return M.MAV_MISSION_NO_SPACE, [Text(M.MAV_SEVERITY_WARNING, self._limit_text())]
+            return M.MAV_MISSION_NO_SPACE, self._limit_text()
         for seq, item in enumerate(items):
             result = self.store.check_item(item, seq, len(items))
             if result != ACCEPTED:
-                return result, []
+                return result, f"{self.store.label} item {seq}: {M.enums['MAV_MISSION_RESULT'][result].name}"
         reason = self.store.check_plan(items)
-        if reason is not None:
-            return ERROR, [Text(M.MAV_SEVERITY_WARNING, reason)]
+        return (ACCEPTED, None) if reason is None else (ERROR, reason)
+
+    def write_plan(self, items, now: float) -> tuple[int, list[Output]]:
+        """Replace the whole plan at once, with every check an upload makes (check_write); the
+        reason of NO_SPACE or ERROR goes out as text, as does a save that failed (ERROR)."""
+        items = tuple(items)
+        result, why = self.check_write(items)
+        if result != ACCEPTED:
+            shown = result in (M.MAV_MISSION_NO_SPACE, ERROR)
+            return result, [Text(M.MAV_SEVERITY_WARNING, why)] if shown else []
         try:
             self.store.replace(items)
         except OSError as exc:
-            return ERROR, [self._save_failed(exc)]
+            return ERROR, [self.save_failed(exc)]
+        return ACCEPTED, self.written()
+
+    def written(self) -> list[Output]:
+        """The store's plan was replaced from elsewhere: no upload's final ACK to repeat now."""
         self._finished = None
-        return ACCEPTED, [PlanChanged(self.mission_type, self.store.count())]
+        return [PlanChanged(self.mission_type, self.store.count())]
 
     def cancel(self, now: float) -> list[Output]:
         """The vehicle is stopping: an upload in progress ends with OPERATION_CANCELLED."""
@@ -317,7 +328,7 @@ class MissionTransfer:
             try:
                 self.store.replace(tuple(plan))
             except OSError as exc:
-                out.append(self._save_failed(exc))
+                out.append(self.save_failed(exc))
                 result = ERROR
             else:
                 result = ACCEPTED
@@ -337,7 +348,7 @@ class MissionTransfer:
         return [Text(M.MAV_SEVERITY_WARNING, self._limit_text(), origin.channel),
                 self._ack(origin, M.MAV_MISSION_NO_SPACE)]
 
-    def _save_failed(self, exc: OSError) -> Text:
+    def save_failed(self, exc: OSError) -> Text:
         return Text(M.MAV_SEVERITY_ERROR, f"{self.store.label} not saved: {exc.strerror or exc}")
 
     def _request(self, up: _Upload, now: float) -> Send:

@@ -48,6 +48,7 @@ from ..mission.download import is_lossy
 from ..mission.effects import Origin, PlanChanged, Send, Text
 from ..mission.items import MissionItem, from_item_float, from_item_int
 from ..mission.stores import FenceStore, MissionStore, PlanStore, RallyStore
+from ..mission.together import Written, write_together
 from ..mission.transfer import MissionTransfer
 from ..rtt import RttTable
 from ..sim.geo import deg_e7
@@ -234,7 +235,7 @@ class MissionService(Service):
         """Home was set: with no mission, the mission becomes home alone."""
         self.mission.home_changed()
 
-    # --- whole plans (for FTP's @MISSION/mission.dat, fence.dat, rally.dat) -------------------
+    # --- whole plans (FTP's @MISSION/mission.dat, fence.dat, rally.dat; the HTTP .plan) -------
     def read_plan(self, mission_type: int) -> tuple[MissionItem, ...] | None:
         """The plan as a download serves it (None for an unknown type)."""
         t = self.transfers.get(mission_type)
@@ -248,6 +249,13 @@ class MissionService(Service):
         result, out = t.write_plan(items, self.ctx.now())
         self._run(out)
         return result
+
+    def write_plans(self, plans: dict[int, tuple[MissionItem, ...]]) -> Written:
+        """Replace several plans (by mission type) all or none, each with the checks of an upload
+        (gcsd.mission.together); the refusal's reason is returned, not sent as text."""
+        written = write_together((self.transfers[t], items) for t, items in plans.items())
+        self._run(written.outputs)
+        return written
 
     def shutdown(self, now: float) -> None:
         """A clean stop: uploads in progress are cancelled (their uploaders are told); plans were
