@@ -4,8 +4,9 @@ The plan (tests/data/qgc/fence_rally.plan, QGC's format) is PUT over HTTP; a pym
 station on a real UDP socket then downloads MISSION_TYPE_FENCE and MISSION_TYPE_RALLY as QGC
 would, and what it gets is compared with the file itself (read here, not through gcsd's
 converter): commands, counts, vertex counts, latitudes and longitudes as int32 degE7. A GET gives
-back what was PUT; a bad plan is refused (422, or 400 for malformed JSON) with nothing of it
-stored, which the ground station's download of the old plan shows.
+back what was PUT, and shows what a ground station uploaded over MAVLink; a bad plan is refused
+(422, or 400 for malformed JSON) with nothing of it stored, which the ground station's download
+of the old plan shows. The fence put is the one the vehicle's pre-arm check uses.
 """
 
 from __future__ import annotations
@@ -17,9 +18,10 @@ from pathlib import Path
 from tests.unit.test_http_plan_fence import normalised, qgc_plan
 
 from gcsd.mission import wpl
+from gcsd.mission.items import MissionItem
 
 from .helpers import VEHICLE, M, is_type, udp_url, wait_for
-from .http_client import call
+from .http_client import call, poll
 from .mission_client import MissionClient
 from .test_http_api import GCS_CHANNEL, api  # noqa: F401  (the fixture)
 
@@ -143,7 +145,8 @@ def test_a_plan_is_refused_with_409_while_a_ground_station_uploads_a_fence(api):
     assert status == 409 and "uploading" in body["error"]
     assert len(MissionClient(gcs).download(RALLY)) == 0  # nothing of the plan was taken
     gcs.send(M.MAVLink_mission_ack_message(*VEHICLE, M.MAV_MISSION_OPERATION_CANCELLED, FENCE))  # the GCS gives up
-    assert put(url, qgc_plan())[0] == 200
+    # the UDP datagram and the HTTP request race: taken within 3 s, long before the 8 s upload timeout
+    assert poll(lambda: put(url, qgc_plan())[0] == 200, timeout=3.0)
     assert len(MissionClient(gcs).download(RALLY)) == 3
 
 
@@ -169,3 +172,36 @@ def test_the_plan_survives_a_restart_and_an_empty_geofence_clears_the_fence(daem
     station = MissionClient(gcs)
     assert station.download(FENCE) == [] and station.download(RALLY) == []
     assert len(station.download(M.MAV_MISSION_TYPE_MISSION)) == 5  # positive control: the mission is there
+
+
+def test_the_vehicle_arms_by_the_fence_of_the_plan(api):  # noqa: F811
+    """The fence put over HTTP is the one the vehicle's pre-arm check uses (FENCE_TYPE's polygon bit)."""
+    _, url, gcs = api
+    assert call(f"{url}/v1/vehicles/1/parameters/FENCE_ENABLE", "PUT", {"value": 1})[0] == 200
+    assert put(url, qgc_plan())[0] == 200  # home inside the inclusion zones, outside the exclusions
+    assert call(f"{url}/v1/vehicles/1/arm", "POST", {})[0] == 200  # positive control
+    assert call(f"{url}/v1/vehicles/1/disarm", "POST", {})[0] == 200
+    walled = qgc_plan()
+    walled["geoFence"]["circles"][1]["circle"].update(center=[-35.3632621, 149.1652374], radius=20)  # around home
+    assert put(url, walled)[0] == 200
+    mark = gcs.mark()
+    status, _, body, _ = call(f"{url}/v1/vehicles/1/arm", "POST", {})
+    assert status == 409 and "COMPONENT_ARM_DISARM" in body["error"]
+    text = wait_for(gcs, lambda r: r.type == "STATUSTEXT" and "Fence" in r.msg.text, since=mark)
+    assert text and "PreArm: Fence: vehicle outside the polygon fence" in text.msg.text
+
+
+def test_a_fence_and_rally_points_a_ground_station_uploads_are_what_get_shows(api):  # noqa: F811
+    _, url, gcs = api
+    plan = qgc_plan()
+    frame = M.MAV_FRAME_GLOBAL_INT  # another ground station's choices: its own frame, circles first
+    fence = [MissionItem(cmd, frame, 0, 1, p1, x=x, y=y) for cmd, p1, x, y in expected_fence(plan)[:11]]
+    fence = fence[9:] + fence[:9]
+    points = [MissionItem(cmd, M.MAV_FRAME_GLOBAL, 0, 1, x=x, y=y, z=z) for cmd, x, y, z in expected_rally(plan)]
+    station = MissionClient(gcs)
+    assert station.upload(fence, FENCE) == M.MAV_MISSION_ACCEPTED
+    assert station.upload(points, RALLY) == M.MAV_MISSION_ACCEPTED
+    got = get(url)
+    del plan["geoFence"]["breachReturn"]  # not uploaded
+    assert normalised(got["geoFence"]) == normalised(plan["geoFence"])
+    assert normalised(got["rallyPoints"]) == normalised(plan["rallyPoints"])
