@@ -10,7 +10,8 @@ States per key: absent -> remembered at t (`remember`) -> expired at t + window_
 that keeps coming back is still forgotten window_s after it was remembered.
 Bound: at most `max_frames` keys; beyond it the oldest is forgotten first (the window shrinks
 under a flood, `evicted` counts it) instead of memory growing. Expiry walks a FIFO of
-(time, key) from its old end, a few entries per call: O(1) amortised, no timer.
+(time, key) from its old end, every eighth of a window (and at once beyond max_frames):
+O(1) amortised, no timer; `seen` compares times, so a key not yet swept is still expired.
 
 Uses:
 - Loop protection (gcs.py, on by default, LOOP_WINDOW_S): the router remembers every frame it
@@ -39,10 +40,11 @@ from collections import deque
 
 LOOP_WINDOW_S = 0.5
 MAX_FRAMES = 65536  # 0.5 s of 130 000 frames/s, four times what one process routes
+SWEEP_FRACTION = 0.125  # expired keys are swept out every eighth of a window
 
 
 class RecentFrames:
-    __slots__ = ("_at", "_order", "evicted", "max_frames", "window_s")
+    __slots__ = ("_at", "_order", "_sweep_at", "evicted", "max_frames", "window_s")
 
     def __init__(self, window_s: float, max_frames: int = MAX_FRAMES) -> None:
         if window_s <= 0 or max_frames < 1:
@@ -52,6 +54,7 @@ class RecentFrames:
         self._at: dict[bytes, float] = {}
         self._order: deque[tuple[float, bytes]] = deque()
         self.evicted = 0  # keys forgotten before their window ended, to stay within max_frames
+        self._sweep_at = float("-inf")
 
     def __len__(self) -> int:
         return len(self._at)
@@ -64,10 +67,19 @@ class RecentFrames:
     def remember(self, raw: bytes, now: float) -> None:
         """Remember these bytes from `now` (again, if they had expired)."""
         at = self._at
-        order = self._order
         at[raw] = now
-        order.append((now, raw))
+        self._order.append((now, raw))
+        if now >= self._sweep_at or len(at) > self.max_frames:
+            self._expire(now)
+
+    def _expire(self, now: float) -> None:
+        """Forget what is older than the window (and the oldest beyond max_frames). Run every
+        SWEEP_FRACTION of a window rather than per frame: `seen` compares times itself, so an
+        expired key still held until the next sweep is never taken for a recent one."""
+        at = self._at
+        order = self._order
         horizon = now - self.window_s
+        self._sweep_at = now + self.window_s * SWEEP_FRACTION
         while order and (order[0][0] <= horizon or len(at) > self.max_frames):
             t, key = order.popleft()
             if at.get(key) == t:

@@ -40,7 +40,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .msgids import HEARTBEAT as MSG_ID_HEARTBEAT
-from .msgids import is_radio
+from .msgids import RADIO, RADIO_STATUS
 
 MAX_ROUTES = 20
 STALE_S = 30.0
@@ -71,6 +71,19 @@ class Decision:
 
 
 IGNORE = Decision(False)
+_DECISIONS: dict[tuple[bool, tuple[int, ...]], Decision] = {}
+
+
+def _decision(process: bool, out: tuple[int, ...] = ()) -> Decision:
+    """The Decision for these values, made once: a frozen dataclass costs more to build than a
+    routed frame's whole decision, and a daemon meets only a handful of distinct ones."""
+    key = (process, out)
+    d = _DECISIONS.get(key)
+    if d is None:
+        if len(_DECISIONS) >= 1024:  # channel sets of a many-channel daemon: bounded all the same
+            _DECISIONS.clear()
+        d = _DECISIONS[key] = Decision(process, out)
+    return d
 _NONE: list[Route] = []
 
 
@@ -192,15 +205,15 @@ class Router:
             return self._unknown_message(in_channel, sysid, compid, now)
         if sysid != 0 and not (sysid in self.local_sysids and compid == 0):
             self.table.learn(sysid, compid, in_channel, now, mavtype)
-        if is_radio(msgid):
-            return Decision(True)
+        if msgid == RADIO_STATUS or msgid == RADIO:  # is_radio, inlined: this runs per frame
+            return _decision(True)
         policy_in = self.policies[in_channel]
         closed_in = policy_in.private or policy_in.no_forward
         if msgid == MSG_ID_HEARTBEAT:
             if closed_in:
-                return Decision(True)
+                return _decision(True)
             out = self._heartbeat_channels(in_channel, sysid, compid, active_channels)
-            return Decision(True, self._grouped(out, in_channel) if self.members else out)
+            return _decision(True, self._grouped(out, in_channel) if self.members else out)
 
         broadcast_system = target_system <= 0
         broadcast_component = target_component <= 0
@@ -209,9 +222,9 @@ class Router:
             broadcast_component or self._local_compid(target_system, target_component, broadcast_system)
         )
         if closed_in:
-            return Decision(addressed_to_us)
+            return _decision(addressed_to_us)
         if not broadcast_system and not broadcast_component and (target_system, target_component) in self.local:
-            return Decision(True)
+            return _decision(True)
 
         out: list[int] = []
         policies = self.policies
@@ -236,7 +249,7 @@ class Router:
                 if broadcast_component or remote or target_component == route.compid:
                     out.append(ch)
         process = addressed_to_us or (not out and match_system) or broadcast_system
-        return Decision(process, self._grouped(out, in_channel) if self.members else tuple(out))
+        return _decision(process, self._grouped(out, in_channel) if self.members else tuple(out))
 
     def _unknown_message(self, in_channel: int, sysid: int, compid: int, now: float) -> Decision:
         policy = self.policies[in_channel]
@@ -244,7 +257,7 @@ class Router:
             self.unknown_dropped += 1
             return IGNORE
         self.table.learn(sysid, compid, in_channel, now)  # refresh only: the route exists
-        return Decision(False, self.broadcast_channels(in_channel))
+        return _decision(False, self.broadcast_channels(in_channel))
 
     def _grouped(self, out, in_channel: int) -> tuple[int, ...]:
         """`out` with each grouped channel widened to its whole group, minus the ingress group."""

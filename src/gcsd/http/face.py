@@ -1,7 +1,7 @@
 """The HTTP API's view of the daemon (routes.Api): the tree, the WebSocket hub, sending, vehicles.
 
 Fed by two paths, each message counted once:
-- `frame_seen(channel, frame, now)`, the daemon's frame tap: every good frame received on any
+- `frame_seen(frame, wall_s)`, the daemon's frame tap (at the channel's wake-up time): every good frame received on any
   channel (the traffic gcsd routes, the ground stations, and what clients post, which comes in
   on the `http` channel); stored as the Frame, decoded only when read. A frame from one of our
   own vehicles (a loop between two links) is left out, as the router ignores it.
@@ -64,11 +64,11 @@ class Face:
         channel.sink = self.own
 
     # --- the two feeds ---------------------------------------------------------------------
-    def frame_seen(self, channel, frame: Frame, now: float) -> None:
+    def frame_seen(self, frame: Frame, wall_s: float) -> None:
         if not frame.known or (frame.sysid, frame.compid) in self._local:
             return  # our own frames come back only through a loop: the http channel has them
         name = frame.name
-        self.tree.update(frame.sysid, frame.compid, name, frame, self._wall())
+        self.tree.update(frame.sysid, frame.compid, name, frame, wall_s)
         if self.hub.subscribers:
             self.hub.publish(frame.sysid, frame.compid, frame.seq, name, frame)
 

@@ -85,5 +85,6 @@ class LocalChannel(Channel):
                 self._injectors.clear()  # bounded: sequences restart for sources seen long ago
             encoder = self._injectors[(sysid, compid)] = Encoder(sysid, compid)
         raw = encoder.encode(msg, False, None)
+        self.tick(now, self.wall())  # as a transport does at a wake-up: the time the frame is seen
         for frame in self.peers[PEER_KEY].parser.feed(raw):
             self.on_frame(self, frame, now)

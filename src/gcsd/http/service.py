@@ -75,10 +75,11 @@ class HttpService:
                 "error": None if self.address is not None else self.listen_error}
 
     def tap(self, channel, frame, now: float) -> None:
-        """The daemon's tap (compose.py): every accepted frame, before routing. The tree's own
-        guard: a fault here is counted and never costs the frame its routing."""
+        """The daemon's tap (compose.py): every accepted frame, before routing, at the wall time
+        of the channel's wake-up. The tree's own guard: a fault here is counted and never costs
+        the frame its routing."""
         try:
-            self.face.frame_seen(channel, frame, now)
+            self.face.frame_seen(frame, channel.out.time.wall)
         except Exception:  # noqa: BLE001  (the tree's guard: counted, the frame is still routed)
             self._errors.failed("http:tap", self._now(), channel=channel.name, msg=frame.name)
 
