@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from .scheduler import SendScheduler
+from .scheduler import SendScheduler, ServiceShare
 from .streams import STREAM_MESSAGES, STREAM_OF_MESSAGE, rate_to_interval_ms
 
 HEARTBEAT_MS = 1000
@@ -32,6 +32,9 @@ class Link:
         self._wake = wake
         self.stream_rates: dict[str, float] = dict(channel.config.streams)
         self._slow_reasons: set[str] = set()
+        budget = channel.out.budget
+        # the services' guaranteed part of the channel's byte budget (None: no budget, no need)
+        self.share = None if budget is None else ServiceShare(budget.rate_bps, budget.capacity, now)
         if self.high_latency:
             self.scheduler.set_interval(M.MAVLINK_MSG_ID_HIGH_LATENCY2, HIGH_LATENCY2_MS, now)
         else:

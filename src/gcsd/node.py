@@ -235,8 +235,12 @@ class VehicleNode:
 
     def send_pass(self, channel: Channel, now: float) -> float | None:
         """Run this node's scheduler, text queue and service timers on one channel; returns the
-        next deadline."""
+        next deadline. The order (scheduler.py, "The pass"): queued replies; HEARTBEAT and pushed
+        messages; the services' turn (STATUSTEXT, then each service's `pending`), within their
+        ServiceShare of the byte budget while streams are due; then the stream buckets, unless a
+        service is waiting for the budget to refill within its share."""
         link = self.links[channel.index]
+        scheduler = link.scheduler
         sysid, compid = self.sysid, self.compid
         errors, producers = self.errors, self.producers
         out = channel.out  # the only writer (outbox.py): asked directly, one hop fewer per message
@@ -257,30 +261,53 @@ class VehicleNode:
                 errors.failed(f"producer:{M.mavlink_map[msgid].msgname}", now, channel=channel.name, sysid=sysid)
             return True
 
+        if out.replies and not out.flush_replies():  # replies owed first, then the rest
+            return now + max(out.budget_wait_s(), 0.001)
+        if not scheduler.run_urgent(now, send):
+            return now + max(out.budget_wait_s(), 0.001)
+        share = link.share
+        if share is not None:
+            share.begin(enforced=scheduler.streams_due(now))
+        deadline = self._services_turn(channel, now, share)
+        if share is not None and share.waiting:  # owed traffic waits for a full frame: the streams hold back
+            streams = now + max(out.budget_wait_s(), 0.001)
+        elif scheduler.run_streams(now, send):
+            streams = scheduler.next_deadline(now)
+        else:
+            streams = now + max(out.budget_wait_s(), 0.001)
+        if streams is not None and (deadline is None or streams < deadline):
+            deadline = streams
+        return deadline
+
+    def _services_turn(self, channel: Channel, now: float, share) -> float | None:
+        """STATUSTEXT, then every service's `pending`, charged to `share` (and within it while
+        the streams are due) on a link with a byte budget."""
+        out = channel.out
+        sysid, compid, errors = self.sysid, self.compid, self.errors
+        send_message = out.send_message
+
         def send_text(msg) -> bool:
-            if not has_room(MAX_FRAME_BYTES):
+            if not out.has_room(MAX_FRAME_BYTES):
                 return False
             send_message(msg, sysid, compid)
             return True
 
-        if out.replies and not out.flush_replies():  # replies first, then the schedule
-            return now + max(out.budget_wait_s(), 0.001)
-        finished = link.scheduler.run(now, send) and self._drain_text(channel, now, send_text)
-        if not finished:
-            return now + max(out.budget_wait_s(), 0.001)
-        deadline = link.scheduler.next_deadline(now)
-
         def send_msg(msg) -> bool:
             return send_message(msg, sysid, compid)
 
-        for service in self._senders:
-            try:
-                d = service.pending(channel, now, send_msg)
-            except Exception:  # noqa: BLE001  (a service's error boundary: counted, the others still send)
-                errors.failed(f"service:{type(service).__name__}", now, channel=channel.name, sysid=sysid)
-                continue
-            if d is not None and (deadline is None or d < deadline):
-                deadline = d
+        out.share = share
+        try:
+            deadline = None if self._drain_text(channel, now, send_text) else now + max(out.budget_wait_s(), 0.001)
+            for service in self._senders:
+                try:
+                    d = service.pending(channel, now, send_msg)
+                except Exception:  # noqa: BLE001  (a service's error boundary: counted, the others still send)
+                    errors.failed(f"service:{type(service).__name__}", now, channel=channel.name, sysid=sysid)
+                    continue
+                if d is not None and (deadline is None or d < deadline):
+                    deadline = d
+        finally:
+            out.share = None
         return deadline
 
     def _drain_text(self, channel: Channel, now: float, send_text) -> bool:

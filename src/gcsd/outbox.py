@@ -16,7 +16,9 @@ What goes out, and its checks, in this order:
 The byte budget (`bandwidth`, bytes/s) is a token bucket holding at most 100 ms of traffic (and
 at least one maximal frame). Scheduled telemetry asks `has_room` first and waits
 (`budget_wait_s`); a forwarded frame that finds no budget is dropped and counted, never queued
-without bound. A transport that reports its buffer full also counts as a drop.
+without bound. A transport that reports its buffer full also counts as a drop. During the
+services' turn of a send pass `share` (scheduler.ServiceShare) is set: `has_room` and
+`budget_wait_s` then ask it too, and what is written is charged to it.
 """
 
 from __future__ import annotations
@@ -46,6 +48,11 @@ class TokenBucket:
             return False
         self.tokens -= nbytes
         return True
+
+    def charge(self, nbytes: int, now: float) -> None:
+        """Take nbytes, or all there is (a share's account of what was sent, never refused)."""
+        self._refill(now)
+        self.tokens = max(0.0, self.tokens - nbytes)
 
     def wait_s(self, nbytes: int, now: float) -> float:
         """How long until nbytes may be sent."""
@@ -81,6 +88,7 @@ class Outbox:
         self._encoders: dict[tuple[int, int, bool], Encoder] = {}
         self.replies: deque[tuple[MAVLink_message, int, int]] = deque()
         self.replies_dropped = 0
+        self.share = None  # scheduler.ServiceShare: set by a send pass for its services' turn
 
     @property
     def now(self) -> float:
@@ -92,10 +100,17 @@ class Outbox:
         if budget is None:
             return True
         budget._refill(self.time.now)
-        return budget.tokens >= nbytes
+        share = self.share
+        if share is None:
+            return budget.tokens >= nbytes
+        return share.admits(nbytes, budget.tokens, budget.capacity, self.time.now)
 
     def budget_wait_s(self, nbytes: int = MAX_FRAME_BYTES) -> float:
-        return 0.0 if self.budget is None else self.budget.wait_s(nbytes, self.time.now)
+        if self.budget is None:
+            return 0.0
+        wait_s = self.budget.wait_s(nbytes, self.time.now)
+        share = self.share
+        return wait_s if share is None else max(wait_s, share.wait_s(nbytes, self.time.now))
 
     # --- forwarded frames ------------------------------------------------------------------
     def write(self, raw: bytes) -> bool:
@@ -128,9 +143,13 @@ class Outbox:
         if not self.output_enabled:
             self.stats.muted += 1
             return True  # discarded, as a disabled high-latency link discards everything
-        if self.budget is not None and not self.budget.try_take(len(raw), self.time.now):
-            self.stats.drops += 1
-            return False
+        budget = self.budget
+        if budget is not None:
+            if not budget.try_take(len(raw), self.time.now):
+                self.stats.drops += 1
+                return False
+            if self.share is not None:
+                self.share.charge(len(raw), self.time.now)
         if self.tlog is not None:
             self.tlog.record(raw, self.time.wall)
         sent = False

@@ -1,4 +1,5 @@
-"""The per-link deferred send scheduler (ArduPilot's GCS_MAVLINK::update_send), pure.
+"""The per-link deferred send scheduler (ArduPilot's GCS_MAVLINK::update_send), pure, and the
+services' share of a link's byte budget (ServiceShare).
 
 Three kinds of work, served in this order on every `run(now, send)`:
 
@@ -7,6 +8,9 @@ Three kinds of work, served in this order on every `run(now, send)`:
 2. Pushed one-shot messages (REQUEST_MESSAGE, home after a change...), lowest id first.
 3. Ten buckets, each a set of message ids sharing one interval. The bucket due soonest is taken;
    its ids are sent one by one; only when all are out is the bucket rescheduled.
+
+`run_urgent` does 1 and 2, `run_streams` does 3 (`run` is both): the node's send pass puts the
+services' turn between them (below).
 
 `send(msgid)` is supplied by the caller: it builds and writes the message and returns False when
 the link has no room (byte budget spent). The pass stops there; the same message is retried on
@@ -19,6 +23,27 @@ are streaming on this link), capped at 60 s.
 
 Intervals are whole milliseconds, as in ArduPilot, so GET_MESSAGE_INTERVAL reports what is
 really used. `set_interval` implements the bucket assignment of `set_ap_message_interval`.
+
+The pass (VehicleNode.send_pass), in order of priority:
+
+1. replies queued in the outbox (ACKs, PARAM_VALUE answers, mission items: owed, client-paced);
+2. `run_urgent`: HEARTBEAT and pushed messages;
+3. the services' turn: STATUSTEXT, then each service's `pending` (a parameter list, FTP replies
+   and bursts, log data, mission requests and timers);
+4. `run_streams`: the buckets.
+
+A link with a byte budget (`bandwidth`; a serial channel's is baud // 10) also has a
+ServiceShare: while streams are due (`streams_due`), the services' turn may spend only
+SERVICE_SHARE (2/3) of the budget's rate, and the streams keep the rest; while a service waits
+for the budget to refill within its share (a whole FTP frame, say), the streams hold back for
+that pass (as ArduPilot reserves room for PARAM_VALUE). With no stream due the services may use
+the whole budget, and with no service waiting the streams do: on a link the streams alone fill
+(the copter's defaults want ~2 000 B/s, a 9 600-baud link has 960) a parameter list, FTP and
+STATUSTEXT still get through, while the streams, slowed ×4 as in ArduPilot, keep about a third.
+ArduPilot orders it alike: the NEXT_PARAM special slot (queued parameter replies, then ~30 % of
+the bandwidth for a list) ahead of the pushed messages and the buckets, FTP on its own thread
+pacing bursts to a third of the link. A link without a budget has no share: the services simply
+go before the buckets.
 """
 
 from __future__ import annotations
@@ -26,9 +51,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from .outbox import TokenBucket
+
 NUM_BUCKETS = 10
 MAX_INTERVAL_MS = 60_000
 MIN_INTERVAL_MS = 1  # backstop; the real cap (SCHED_LOOP_RATE) is applied where requests are accepted
+SERVICE_SHARE = 2 / 3  # of a link's byte budget, guaranteed to the services while the streams are due
 
 
 @dataclass(slots=True)
@@ -130,6 +158,10 @@ class SendScheduler:
 
     def run(self, now: float, send: Callable[[int], bool]) -> bool:
         """Send what is due. Returns False if the pass stopped because the link was full."""
+        return self.run_urgent(now, send) and self.run_streams(now, send)
+
+    def run_urgent(self, now: float, send: Callable[[int], bool]) -> bool:
+        """The special slots and the pushed one-shots (what goes ahead of the services' turn)."""
         for msgid, special in self._specials.items():
             if now >= special.next_due_s:
                 if not send(msgid):
@@ -140,6 +172,16 @@ class SendScheduler:
             if not send(msgid):
                 return False
             self._pushed.discard(msgid)
+        return True
+
+    def streams_due(self, now: float) -> bool:
+        """A bucket is due, or half sent: the streams want the link now."""
+        if self._sending:
+            return True
+        return any(b.ids and b.last_sent_s + self._reschedule_ms(b) / 1000.0 <= now for b in self._buckets)
+
+    def run_streams(self, now: float, send: Callable[[int], bool]) -> bool:
+        """The buckets that are due; False if the link filled up before they were all sent."""
         while True:
             if not self._sending and not self._start_next_bucket(now):
                 return True
@@ -181,6 +223,50 @@ class SendScheduler:
             b.last_sent_s + self._reschedule_ms(b) / 1000.0 for b in self._buckets if b.ids
         ]
         return min(deadlines) if deadlines else None
+
+
+class ServiceShare:
+    """The services' guaranteed share of one link's byte budget (a link with a `bandwidth`).
+
+    A bucket filling at SERVICE_SHARE of the link's rate, as deep as the link's. During the
+    services' turn of every pass the outbox charges it with what the services send (`Outbox.share`;
+    never below empty) and, when the streams are due (`begin(enforced=True)`), asks it as well
+    as the link's budget: a service may send while its share has room. When the share has room
+    but the link has not, the service is `waiting` and the streams hold back for this pass, so
+    owed traffic of a whole frame is not nibbled away by 40-byte stream messages; when the share
+    is spent, the streams have the link. Under contention the services get SERVICE_SHARE of the
+    budget and the streams the rest; with no stream due the services may use all of it, and
+    with no service waiting the streams do.
+    """
+
+    def __init__(self, rate_bps: float, capacity: float, now: float) -> None:
+        self.bucket = TokenBucket(rate_bps * SERVICE_SHARE, now)
+        self.bucket.capacity = self.bucket.tokens = float(capacity)
+        self.enforced = False
+        self.waiting = False
+
+    def begin(self, enforced: bool) -> None:
+        """A new services' turn: limited by the share when `enforced` (the streams are due)."""
+        self.enforced = enforced
+        self.waiting = False
+
+    def admits(self, nbytes: int, link_tokens: float, link_capacity: float, now: float) -> bool:
+        """May nbytes go now? `link_tokens`: what the link's budget holds at `now`."""
+        if not self.enforced:
+            return link_tokens >= nbytes
+        if self.bucket.wait_s(nbytes, now) > 0.0:
+            return False  # the share is spent: the streams' turn
+        if link_tokens >= nbytes:
+            return True
+        if nbytes <= link_capacity:
+            self.waiting = True  # owed traffic waits for the link to refill: the streams hold back
+        return False
+
+    def wait_s(self, nbytes: int, now: float) -> float:
+        return self.bucket.wait_s(nbytes, now) if self.enforced else 0.0
+
+    def charge(self, nbytes: int, now: float) -> None:
+        self.bucket.charge(nbytes, now)
 
 
 def _advance(last_s: float, interval_s: float, now: float) -> float:

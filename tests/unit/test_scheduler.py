@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from gcsd.scheduler import MIN_INTERVAL_MS, NUM_BUCKETS, SendScheduler
+import pytest
+
+from gcsd.scheduler import MIN_INTERVAL_MS, NUM_BUCKETS, SERVICE_SHARE, SendScheduler, ServiceShare
 
 HB = 0
 
@@ -173,3 +175,64 @@ def test_deadline_is_now_while_pushed_messages_wait():
     s = SendScheduler(0.0)
     s.push(148)
     assert s.next_deadline(3.0) == 3.0
+
+
+# --- the pass's parts and the services' share (ServiceShare) --------------------------------------
+
+def test_streams_due_says_when_a_bucket_wants_the_link():
+    s = SendScheduler(0.0, special_ids=(HB,))
+    s.set_interval(HB, 1000, 0.0)
+    assert not s.streams_due(5.0), "HEARTBEAT is no stream"
+    s.set_interval(30, 100, 0.0)
+    assert not s.streams_due(0.05) and s.streams_due(0.1)
+    rec = Recorder(room=0)
+    assert s.run_streams(0.1, rec) is False
+    assert s.streams_due(0.1), "a bucket the link could not take is still due"
+    rec.room = 10
+    assert s.run_streams(0.1, rec) and not s.streams_due(0.1) and s.streams_due(0.2)
+
+
+def test_run_urgent_sends_specials_and_pushed_but_no_bucket():
+    s = SendScheduler(0.0, special_ids=(HB,))
+    s.set_interval(HB, 1000, 0.0)
+    s.set_interval(30, 100, 0.0)
+    s.push(148)
+    rec = Recorder()
+    assert s.run_urgent(0.5, rec) and rec.ids() == [HB, 148]
+    assert s.run_streams(0.5, rec) and rec.ids() == [HB, 148, 30]
+
+
+RATE, DEPTH = 960.0, 280.0  # a 9600-baud link's budget and its bucket
+
+
+def test_an_idle_share_admits_whatever_the_link_has():
+    share = ServiceShare(RATE, DEPTH, 0.0)
+    share.begin(enforced=False)
+    share.charge(280, 0.0)  # spent, but no stream is due: the services may use the whole link
+    assert share.admits(280, 280.0, DEPTH, 0.0) and not share.admits(281, 280.0, DEPTH, 0.0)
+    assert share.wait_s(280, 0.0) == 0.0 and not share.waiting
+
+
+def test_an_enforced_share_limits_the_services_to_their_part_of_the_rate():
+    share = ServiceShare(RATE, DEPTH, 0.0)
+    share.begin(enforced=True)
+    assert share.admits(280, 280.0, DEPTH, 0.0)
+    share.charge(280, 0.0)
+    assert not share.admits(37, 280.0, DEPTH, 0.0) and not share.waiting, "spent: the streams' turn"
+    assert share.wait_s(37, 0.0) == pytest.approx(37 / (RATE * SERVICE_SHARE))
+    assert share.admits(37, 280.0, DEPTH, 37 / (RATE * SERVICE_SHARE))  # refilled at 2/3 of the rate
+
+
+def test_a_service_within_its_share_waits_for_the_link_and_the_streams_hold_back():
+    share = ServiceShare(RATE, DEPTH, 0.0)
+    share.begin(enforced=True)
+    assert not share.admits(280, 100.0, DEPTH, 0.0) and share.waiting
+    share.begin(enforced=True)
+    assert not share.admits(10_000, 100.0, DEPTH, 0.0) and not share.waiting, "never fits: nobody waits for it"
+
+
+def test_charges_never_leave_the_share_in_debt():
+    share = ServiceShare(RATE, DEPTH, 0.0)
+    share.begin(enforced=True)
+    share.charge(10_000, 0.0)  # a sender that did not ask first
+    assert share.admits(37, 280.0, DEPTH, 37 / (RATE * SERVICE_SHARE))

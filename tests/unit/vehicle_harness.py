@@ -5,7 +5,9 @@ composition root (parameters, services, autopilot, simulation) from YAML-equival
 is a float the test advances. Messages from the "ground station" (sysid 255) go in through the
 node's dispatch (`send`, `command`); everything the node sends on the channel is decoded with
 pymavlink and kept (`received`, `texts()`, `last(type)`). `run(seconds)` advances the clock in
-steps, stepping the simulation (`node.step`) and running the node's send pass each time.
+steps, stepping the simulation (`node.step`) and running the node's send pass each time;
+`serve(seconds)` instead runs each pass at the deadline the previous one returned, as the
+channel task does (what a test of the byte budget's pacing needs).
 """
 
 from __future__ import annotations
@@ -98,6 +100,24 @@ class Harness:
             self.node.step(self.t)  # the simulation task's tick
             self.channel.tick(self.t, self.clock.wall())
             self.node.send_pass(self.channel, self.t)
+            if until is not None and until():
+                return True
+        return until is None
+
+    def serve(self, seconds: float, until=None, sim_step: float = 0.05) -> bool:
+        """Advance the clock as the channel task does (transport.run_channel): the next send pass
+        at the deadline the last one returned (at most 0.5 s later), the simulation every
+        sim_step; with `until`, stop as soon as until() is true (returns whether it was)."""
+        end = self.t + seconds
+        deadline, next_step = self.t, self.t
+        while self.t < end:
+            wake = self.t + 0.5 if deadline is None else min(max(deadline, self.t + 1e-4), self.t + 0.5)
+            self.t = min(wake, next_step, end)
+            if self.t >= next_step:
+                self.node.step(self.t)
+                next_step = self.t + sim_step
+            self.channel.tick(self.t, self.clock.wall())
+            deadline = self.node.send_pass(self.channel, self.t)
             if until is not None and until():
                 return True
         return until is None

@@ -267,8 +267,8 @@ class MissionService(Service):
     def pending(self, channel, now: float, send) -> float | None:
         """Called from the node's send pass: run the transfer timers; return the next deadline.
 
-        A tick that queued a STATUSTEXT or changed the links' slowdown asks for another pass at
-        once (`now`): the text queue and the stream schedule were already run in this one.
+        A tick that queued a STATUSTEXT asks for another pass at once (`now`): the text queue
+        was already run in this one (scheduler.py, "The pass").
         """
         again = False
         for t in self.transfers.values():

@@ -10,7 +10,9 @@
   datagram, a default 208 KiB receive buffer holds only ~270 of them, and a busy pymavlink
   client lost 700 of 1 000 sent at full speed. ArduPilot paces the same way: queued_param_send
   sends at most 5 values per loop when the link has no flow control (~2 000 a second; SITL
-  served 1 354 in 0.70 s). A stream link (TCP, serial) goes as fast as its budget allows.
+  served 1 354 in 0.70 s). A stream link (TCP, serial) goes as fast as its budget allows:
+  the services' turn comes before the streams, within its share of the budget while they are
+  due (scheduler.ServiceShare: 1 000 values in ~55 s at 9 600 baud with the default streams).
   While a list streams, the link's telemetry is slowed x4.
 - PARAM_REQUEST_READ by index (index >= 0) or by name (index -1) is answered at once on the
   requesting link; an unknown name or index gets no reply (as ArduPilot).
