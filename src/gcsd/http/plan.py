@@ -103,9 +103,9 @@ def _item(raw: object, where: str) -> MissionItem:
         raise PlanError(f"{where}: type {raw.get('type')!r}: only SimpleItem is taken (complex items such as "
                         "surveys are made into simple ones by QGroundControl before an upload)")
     command, frame = raw.get("command"), raw.get("frame")
-    for key, value in (("command", command), ("frame", frame)):
-        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 0xFFFF:
-            raise PlanError(f"{where}.{key}: expected an integer")
+    for key, value, top in (("command", command, 0xFFFF), ("frame", frame, 0xFF)):  # uint16, uint8 on the wire
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= top:
+            raise PlanError(f"{where}.{key}: expected an integer 0..{top}")
     auto = raw.get("autoContinue", True)
     if not isinstance(auto, bool):
         raise PlanError(f"{where}.autoContinue: expected true or false")
@@ -119,7 +119,7 @@ def _item(raw: object, where: str) -> MissionItem:
         elif isinstance(p, bool) or not isinstance(p, (int, float)):
             raise PlanError(f"{where}.params[{i}]: expected a number or null")
         elif not abs(p) <= FLOAT32_MAX:  # infinity too (1e999 in JSON)
-            raise PlanError(f"{where}.params[{i}]: {p!r} is beyond a 32-bit float")
+            raise PlanError(f"{where}.params[{i}]: {repr(p)[:20]} is beyond a 32-bit float")
         else:
             values.append(float(p))
     x, y = values[4], values[5]

@@ -27,8 +27,6 @@ point, whatever order a ground station uploaded them in.
 
 from __future__ import annotations
 
-import math
-
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from ..mission.items import LOCATION_ALT_MAX_M, MissionItem
@@ -73,8 +71,8 @@ def fence_items(fence: object) -> tuple[MissionItem, ...]:
         inclusion, body = _shape(circle, where, "circle", dict, '{"center": [lat, lon], "radius": metres}')
         lat, lon, _ = _coordinate(body.get("center"), f"{where}.circle.center", altitude=False)
         radius = body.get("radius")
-        if not _is_number(radius) or not 0 < radius <= FLOAT32_MAX:
-            raise PlanError(f"{where}.circle.radius: {radius!r}; expected a finite number of metres > 0")
+        if not _is_number(radius) or not radius > 0:
+            raise PlanError(f"{where}.circle.radius: {repr(radius)[:20]}; expected a finite number of metres > 0")
         items.append(MissionItem(CIRCLE[inclusion], FENCE_FRAME, 0, 0, float(radius), x=lat, y=lon))
     if "breachReturn" in fence:
         lat, lon, alt = _coordinate(fence["breachReturn"], "geoFence.breachReturn", altitude=True)
@@ -126,7 +124,9 @@ def _shape(shape: object, where: str, key: str, kind: type, expected: str) -> tu
 
 
 def _is_number(value: object) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    """A JSON number a MISSION_ITEM_INT can carry: not NaN, infinite (1e999), nor an integer too
+    large for a float (10**400, which math.isfinite cannot even take)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and abs(value) <= FLOAT32_MAX
 
 
 def _coordinate(value: object, where: str, altitude: bool) -> tuple[int, int, float]:
@@ -136,7 +136,7 @@ def _coordinate(value: object, where: str, altitude: bool) -> tuple[int, int, fl
         raise PlanError(f"{where}: expected {shape}")
     for v in value:
         if not _is_number(v):
-            raise PlanError(f"{where}: {v!r} in {shape}; expected finite numbers (null is NaN)")
+            raise PlanError(f"{where}: {repr(v)[:20]} in {shape}; expected finite numbers (null is NaN)")
     lat, lon = value[0], value[1]
     if not -90 <= lat <= 90:
         raise PlanError(f"{where}: latitude {lat} out of -90..90")
