@@ -119,6 +119,8 @@ BAD = [
     (lambda p: _circle(p, 1).update(radius=None), r"circles\[1\].circle.radius: None"),
     (lambda p: _circle(p, 1).update(radius=math.inf), r"circles\[1\].circle.radius: inf"),
     (lambda p: _circle(p, 1).update(radius=1e39), r"circles\[1\].circle.radius"),
+    (lambda p: _circle(p, 1).update(radius=1e-50), r"circles\[1\].circle.radius: 1e-50"),  # 0.0 as a float
+    (lambda p: _circle(p, 1).update(radius=10**400), r"circles\[1\].circle.radius: 1000"),
     (lambda p: _circle(p, 0).update(center=[-91.0, 149.0]), r"circles\[0\].circle.center: latitude -91"),
     (lambda p: _circle(p, 0).pop("center"), r"circles\[0\].circle.center: expected \[lat, lon\]"),
     (lambda p: p["geoFence"]["circles"][0].pop("circle"), r"circles\[0\].circle: expected"),

@@ -9,16 +9,16 @@
 
 import math
 
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as M
 from tests.unit.test_http_plan_fence import HOME, normalised, qgc_plan
 
 from gcsd.http.plan import PlanError, from_plan, to_plan
-from gcsd.mission.items import item_int_message
+from gcsd.mission.items import from_item_int, item_int_message
 from gcsd.mission.stores import FenceStore, RallyStore, validate
 
-EDGES = [-1, 0, 255, 256, 65535, 65536, 2**31 - 1, 2**31, -(2**31) - 1, 2**64, 3.5e38, 1e39, 10**400]
+EDGES = [-1, 0, 1e-50, 255, 256, 65535, 65536, 2**31 - 1, 2**31, -(2**31) - 1, 2**64, 3.5e38, 1e39, 10**400]
 NUMBER = (st.none() | st.booleans() | st.sampled_from(EDGES) | st.integers(-70_000, 70_000)
           | st.integers(-(10**400), 10**400) | st.floats(allow_nan=False))  # infinity included: JSON's 1e999
 JSON = st.recursive(
@@ -41,14 +41,21 @@ LAT = st.integers(-900_000_000, 900_000_000).map(lambda e7: e7 / 1e7)
 LON = st.integers(-1_800_000_000, 1_800_000_000).map(lambda e7: e7 / 1e7)
 
 
-def _pack(items, mission_type: int) -> None:
+def _wire(items, mission_type: int) -> tuple:
+    """The items as a ground station downloads them: packed into MISSION_ITEM_INT and decoded."""
     mav = M.MAVLink(None, 1, 1)
-    for seq, item in enumerate(items):
-        item_int_message(item, seq, mission_type, (255, 190)).pack(mav)
+    return tuple(from_item_int(mav.decode(bytearray(item_int_message(item, seq, mission_type, (255, 190)).pack(mav))))
+                 for seq, item in enumerate(items))
+
+
+RADIUS = (("geoFence", "circles", 1, "circle"), "radius")
 
 
 @settings(max_examples=400, deadline=None)
 @given(st.sampled_from(PLACES), NUMBER | JSON)
+@example(RADIUS, 1e-50).via("a radius that is 0.0 as a float")
+@example(RADIUS, 10**400).via("an integer too large for a float")
+@example((("mission", "items", 1), "frame"), 256).via("a frame beyond uint8")
 def test_any_value_anywhere_reads_as_a_plan_that_packs_or_is_refused(place, value):
     plan = qgc_plan()
     path, key = place
@@ -60,10 +67,11 @@ def test_any_value_anywhere_reads_as_a_plan_that_packs_or_is_refused(place, valu
         got = from_plan(plan)
     except PlanError:
         return
-    _pack((HOME, *got.mission), M.MAV_MISSION_TYPE_MISSION)
-    _pack(got.fence or (), M.MAV_MISSION_TYPE_FENCE)
-    _pack(got.rally or (), M.MAV_MISSION_TYPE_RALLY)
-    for item in (*(got.fence or ()), *(got.rally or ())):
+    _wire((HOME, *got.mission), M.MAV_MISSION_TYPE_MISSION)
+    fence, rally = _wire(got.fence or (), M.MAV_MISSION_TYPE_FENCE), _wire(got.rally or (), M.MAV_MISSION_TYPE_RALLY)
+    # what a ground station downloads is still a valid fence and rally (a radius of 1e-50 is 0.0 as a float)
+    assert validate(FenceStore(10**6), fence) is None and validate(RallyStore(10**6), rally) is None
+    for item in (*fence, *rally):
         assert all(math.isfinite(v) for v in (item.param1, item.param2, item.param3, item.param4, item.z))
 
 

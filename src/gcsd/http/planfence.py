@@ -20,12 +20,14 @@ latitude and longitude as degE7. Rally points NAV_RALLY_POINT in GLOBAL_RELATIVE
 Reading is strict and says where (`PlanError`, 422): a missing or mistyped key, a version other
 than QGC's, a coordinate that is not finite numbers within +-90 / +-180, an altitude beyond
 ArduPilot's (+-83 km; rally points an int16 of metres), a polygon of fewer than 3 or more than
-255 vertices, a radius not finite and > 0 (nor beyond a 32-bit float). Writing groups a fence
+255 vertices, a radius not > 0 as a 32-bit float (nor beyond one). Writing groups a fence
 back into polygons (consecutive vertices of one command, param1 of them), circles and the return
 point, whatever order a ground station uploaded them in.
 """
 
 from __future__ import annotations
+
+import struct
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
@@ -71,7 +73,7 @@ def fence_items(fence: object) -> tuple[MissionItem, ...]:
         inclusion, body = _shape(circle, where, "circle", dict, '{"center": [lat, lon], "radius": metres}')
         lat, lon, _ = _coordinate(body.get("center"), f"{where}.circle.center", altitude=False)
         radius = body.get("radius")
-        if not _is_number(radius) or not radius > 0:
+        if not _is_number(radius) or not _float32(radius) > 0:  # 1e-50 would go out as 0.0
             raise PlanError(f"{where}.circle.radius: {repr(radius)[:20]}; expected a finite number of metres > 0")
         items.append(MissionItem(CIRCLE[inclusion], FENCE_FRAME, 0, 0, float(radius), x=lat, y=lon))
     if "breachReturn" in fence:
@@ -127,6 +129,11 @@ def _is_number(value: object) -> bool:
     """A JSON number a MISSION_ITEM_INT can carry: not NaN, infinite (1e999), nor an integer too
     large for a float (10**400, which math.isfinite cannot even take)."""
     return isinstance(value, (int, float)) and not isinstance(value, bool) and abs(value) <= FLOAT32_MAX
+
+
+def _float32(value: float) -> float:
+    """The value as a MISSION_ITEM_INT param carries it."""
+    return struct.unpack("<f", struct.pack("<f", value))[0]
 
 
 def _coordinate(value: object, where: str, altitude: bool) -> tuple[int, int, float]:
