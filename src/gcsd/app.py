@@ -17,6 +17,7 @@ SIGHUP (`systemctl reload gcsd`) re-reads the configuration file and applies its
 from __future__ import annotations
 
 import asyncio
+import gc
 import signal
 import sys
 from pathlib import Path
@@ -141,6 +142,10 @@ async def _run_with_notify(gcs: GCS, stop: asyncio.Event, notifier: Notifier) ->
         status = ready_status(gcs)
         notifier.ready(status)
         log.info("daemon_ready", status=status, notify=notifier.enabled)
+        # What start-up built (pymavlink's dialect, the parameter tables, the vehicles) lives as
+        # long as the daemon: out of the collector's sight, so that the collections the packet
+        # path's short-lived objects cause stay short (issue 19: 3-4 % of a routing daemon's time).
+        gc.freeze()
         interval = notifier.watchdog_interval_s
         while interval:
             notifier.watchdog()

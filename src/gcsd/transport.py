@@ -64,8 +64,11 @@ class _Datagram:
 
     asyncio's datagram transport reads one datagram per loop iteration; under load that costs a
     full loop pass per packet. Here each readiness event drains up to DRAIN_BATCH datagrams (one
-    recvmmsg(2) when gcsd._speedups is built: speedups.py), and sends go straight to `sendto` (a
-    full socket buffer is a counted drop, never a queue).
+    recvmmsg(2) when gcsd._speedups is built: speedups.py). What the peers' writers write during
+    a pass of the loop is sent at its end, together (`flush`: one sendmmsg(2) when compiled), in
+    the order written: a routed batch goes out as one system call, not one per frame. A datagram
+    the kernel refuses then (a full socket buffer) is a counted drop, never a queue; `packets_out`
+    counts what was handed to the socket.
     """
 
     DRAIN_BATCH = 64
@@ -79,20 +82,33 @@ class _Datagram:
         self.loop = asyncio.get_running_loop()
         self.closed = self.loop.create_future()
         self._recv_batch = speedups.receiver(sock)  # recvmmsg(2) when compiled (speedups.py)
+        self._send_batch = speedups.sender(sock)  # sendmmsg(2) when compiled
+        self._pending: list[tuple[bytes, tuple]] = []
         self.loop.add_reader(sock.fileno(), self._read_ready)
         channel.make_writer = self.writer
 
     def writer(self, addr) -> Callable[[bytes], bool]:
-        sendto = self.sock.sendto
+        pending = self._pending
+        call_soon, flush = self.loop.call_soon, self.flush
 
         def write(data: bytes) -> bool:
-            try:
-                sendto(data, addr)
-            except OSError:  # buffer full (EAGAIN), unreachable, closed
-                return False
+            if not pending:
+                call_soon(flush)  # at the end of this pass of the loop
+            pending.append((data, addr))
             return True
 
         return write
+
+    def flush(self) -> None:
+        pending = self._pending
+        if not pending or self.sock.fileno() < 0:
+            pending.clear()
+            return
+        items = pending.copy()
+        pending.clear()
+        sent = self._send_batch(self.sock, items)
+        if sent < len(items):
+            self.channel.stats.drops += len(items) - sent
 
     def _read_ready(self) -> None:
         channel = self.channel
@@ -146,6 +162,7 @@ class _Datagram:
 
     def close(self) -> None:
         if self.sock.fileno() >= 0:
+            self.flush()
             self.loop.remove_reader(self.sock.fileno())
             self.sock.close()
         if not self.closed.done():
