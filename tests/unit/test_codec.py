@@ -7,9 +7,8 @@ from __future__ import annotations
 import random
 import struct
 
-from pymavlink.dialects.v20 import ardupilotmega as M
-
 import pytest
+from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd import codec, speedups
 from gcsd.codec import Encoder, FrameParser
