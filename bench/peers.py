@@ -273,6 +273,7 @@ def receiver_main(conn, bind_port: int = 0) -> None:
     learn = False
     hb_seq = 0
     next_hb = 0.0
+    extra: list[bytes] = []  # more frames sent with each HEARTBEAT ("extra": bench/routes.py's fleet)
     conn.send(("ready", sock.getsockname()[1], os.getpid(), rcvbuf))
     while True:
         empty, addr = _drain(sock, buf, trial, learn and peer is None)
@@ -284,6 +285,8 @@ def receiver_main(conn, bind_port: int = 0) -> None:
             if peer is not None:
                 try:
                     sock.sendto(heartbeat(TARGET_SYSID, TARGET_COMPID, MAV_TYPE_ONBOARD_CONTROLLER, hb_seq), peer)
+                    for raw in extra:
+                        sock.sendto(raw, peer)
                 except OSError:
                     pass
                 hb_seq += 1
@@ -304,6 +307,10 @@ def receiver_main(conn, bind_port: int = 0) -> None:
             next_hb = 0.0
             conn.send(("ok",))
         elif cmd == "hb":
+            next_hb = 0.0
+            conn.send(("ok",))
+        elif cmd == "extra":
+            extra = list(args[0])
             next_hb = 0.0
             conn.send(("ok",))
         elif cmd == "reset":

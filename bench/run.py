@@ -7,7 +7,8 @@ one vehicle's cost.
                                          # signing, swarm, http, ftp, fleet (the MQTT fleet, bench/fleet.py),
                                          # lossy (mission upload time vs loss, bench/lossy.py),
                                          # logs (flight-log download and capture, bench/logs.py),
-                                         # companion (filters and rate caps, bench/companion.py)
+                                         # companion (filters and rate caps, bench/companion.py),
+                                         # routes (20 against 250 learned routes, bench/routes.py)
     python -m bench --routers mavproxy   # only some routers (default gcsd,mavlink-router,mavproxy)
 
 mavlink-router is the binary in $GCSD_MAVLINK_ROUTER (or mavlink-routerd on PATH); without it the
@@ -36,6 +37,7 @@ if __package__ in (None, ""):  # run as a script: python bench/run.py
     sys.path.insert(0, str(FsPath(__file__).resolve().parent.parent))
 
 from bench import companion as bench_companion  # noqa: E402
+from bench import routes as bench_routes  # noqa: E402
 from bench import fleet as bench_fleet  # noqa: E402
 from bench import http as bench_http  # noqa: E402
 from bench import ftp as bench_ftp  # noqa: E402
@@ -66,7 +68,7 @@ from bench.routers import (  # noqa: E402
 )
 
 WHAT = ("harness", "throughput", "latency", "vehicle", "params", "param_flood", "mission", "signing", "swarm", "http",
-        "ftp", "fleet", "lossy", "logs", "companion")
+        "ftp", "fleet", "lossy", "logs", "companion", "routes")
 ROUTERS = {"gcsd": "gcsd", "mavlink-router": "mavlink-router", "mavproxy": "MAVProxy"}  # name -> column
 LATENCY_RATE = 1000
 
@@ -245,7 +247,7 @@ class Runner:
                 a.routers = [r for r in a.routers if r != "gcsd"]
                 a.what -= {"vehicle", "params", "param_flood", "mission", "signing", "ftp", "logs"}
                 log(f"gcsd not runnable: {text}")
-        if "mavlink-router" in a.routers and a.what & {"throughput", "latency"}:
+        if "mavlink-router" in a.routers and a.what & {"throughput", "latency", "routes"}:
             self.mavlink_router, how = mavlink_router_binary()
             if self.mavlink_router is None:
                 self.notes.append(f"mavlink-router skipped: {how}")
@@ -280,6 +282,8 @@ class Runner:
             self.res["lossy"] = bench_lossy.measure(self.workdir, self.a.quick, getattr(self, "gcsd_env", None))
         if "companion" in a.what and "gcsd" in a.routers:  # bench/companion.py: filters and rate caps
             self.res["companion"] = bench_companion.measure_gates(self)
+        if "routes" in a.what:  # bench/routes.py: 20 against 250 learned routes, gcsd and mavlink-router
+            self.res["routes"] = bench_routes.measure_routes(self)
         if "logs" in a.what:  # bench/logs.py: 10 MB log download, capture at 921 600 baud
             self.res["logs"] = bench_logs.measure(self.workdir / "logs", self.a.quick, getattr(self, "gcsd_env", None))
 
@@ -481,6 +485,8 @@ class Runner:
             out += ["", bench_lossy.table(self.res["lossy"])]
         if self.res.get("companion"):
             out += ["", bench_companion.table(self.res["companion"])]
+        if self.res.get("routes"):
+            out += ["", bench_routes.table(self.res["routes"])]
         if self.res.get("logs"):
             out += ["", "Flight logs: 10 MB log download (LOG_REQUEST_DATA), capture at 921 600 baud (bench/logs.py)",
                     "", bench_logs.table(self.res["logs"])]
