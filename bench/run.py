@@ -420,7 +420,8 @@ class Runner:
 
         mc = self.res["machine"]
         out.insert(0, f"gcsd bench, {mc['date']}, {mc['nproc']} CPUs ({mc['cpu']}), Python {mc['python']}, "
-                      f"{'quick' if self.a.quick else 'full'} run, gcsd at {mc['gcsd_commit']}")
+                      f"{'quick' if self.a.quick else 'full'} run, gcsd at {mc['gcsd_commit']}"
+                      + (f" ({self.res['gcsd_version']})" if self.res.get("gcsd_version") else ""))
         out.insert(1, "")
         extra = []
         dt = d.get("throughput")

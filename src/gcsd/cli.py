@@ -25,9 +25,10 @@ import sys
 
 import structlog
 
-from gcsd import __version__, cli_channel
+from gcsd import __version__, cli_channel, speedups
 from gcsd.config import ConfigError, default_config, load_config
 from gcsd.log import setup_logging
+from gcsd.loop import loop_name
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
@@ -53,7 +54,7 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="gcsd", description="The vehicle side of MAVLink: a simulated or embedded vehicle that "
                                  "ground stations connect to. With no command: run.")
-    parser.add_argument("--version", action="version", version=f"gcsd {__version__}")
+    parser.add_argument("--version", action="version", version=f"gcsd {__version__} ({loop_name()}, {speedups.DESCRIPTION})")
     parser.add_argument("-c", "--config", metavar="FILE", dest="top_config",
                         help="configuration file; `gcsd -c FILE` is `gcsd run -c FILE`")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")

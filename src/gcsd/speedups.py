@@ -14,7 +14,7 @@ each time. The C module does those things:
 
 It is optional: `setup.py` builds it when a C compiler is there (`optional=True`) and gcsd runs
 the same code in Python when it is not, or when GCSD_PURE_PYTHON is set (to compare, or to rule
-it out). `IMPLEMENTATION` says which one runs; `gcsd status --json` shows it. Both are tested
+it out). `IMPLEMENTATION` says which one runs; `gcsd --version` and `gcsd status --json` show it. Both are tested
 against each other (tests/unit/test_speedups.py, tests/unit/test_codec.py). The compiled
 recv_batch and send_batch take IPv4 sockets only; an IPv6 socket gets the Python ones.
 """
@@ -33,6 +33,7 @@ except ImportError:
     compiled = None
 
 IMPLEMENTATION = "c" if compiled is not None else "python"
+DESCRIPTION = "compiled packet path" if compiled is not None else "pure-Python packet path"  # gcsd --version
 MAX_DATAGRAM = 65536
 
 

@@ -12,8 +12,10 @@ import structlog
 from logging_fixture import restore_logging  # noqa: F401  (an autouse fixture)
 
 import gcsd
+from gcsd import speedups
 from gcsd.cli import main
 from gcsd.config import default_config, load_config
+from gcsd.loop import loop_name
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_YAML = REPO / "config" / "gcsd.yaml"
@@ -96,7 +98,7 @@ def test_python_m_gcsd_check_config_of_a_good_file_exits_0():
 
 def test_version_prints_the_package_version_and_exits_0(capsys):
     assert main(["--version"]) == 0
-    assert capsys.readouterr().out == f"gcsd {gcsd.__version__}\n"
+    assert capsys.readouterr().out == f"gcsd {gcsd.__version__} ({loop_name()}, {speedups.DESCRIPTION})\n"
     assert gcsd.__version__ == "0.1.0"
 
 
