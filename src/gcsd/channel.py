@@ -336,7 +336,7 @@ class Channel:
     def reply_goes_now(self) -> bool:
         """A reply would go out at once: none queued ahead of it and room in the byte budget (what
         an optional copy waits for: it never queues, so it never pushes out an owed reply)."""
-        return not self.out.replies and self.out.has_room(MAX_FRAME_BYTES)
+        return not self.out.replies and self.out.fits_now(MAX_FRAME_BYTES)
 
     def budget_wait_s(self, nbytes: int = MAX_FRAME_BYTES) -> float:
         return self.out.budget_wait_s(nbytes)

@@ -235,10 +235,11 @@ class VehicleNode:
 
     def send_pass(self, channel: Channel, now: float) -> float | None:
         """Run this node's scheduler, text queue and service timers on one channel; returns the
-        next deadline. The order (scheduler.py, "The pass"): queued replies; HEARTBEAT and pushed
-        messages; the services' turn (STATUSTEXT, then each service's `pending`), within their
-        ServiceShare of the byte budget while streams are due; then the stream buckets, unless a
-        service is waiting for the budget to refill within its share."""
+        next deadline. The order (scheduler.py, "The pass"): queued replies (while some remain,
+        nothing else but the streams); HEARTBEAT and pushed messages; STATUSTEXT, then each
+        service's `pending`; the replies, the text and the services all within their ServiceShare
+        of the byte budget while streams are due; then the stream buckets, unless one of them is
+        waiting for the budget to refill within its share."""
         link = self.links[channel.index]
         scheduler = link.scheduler
         sysid, compid = self.sysid, self.compid
@@ -261,14 +262,14 @@ class VehicleNode:
                 errors.failed(f"producer:{M.mavlink_map[msgid].msgname}", now, channel=channel.name, sysid=sysid)
             return True
 
-        if out.replies and not out.flush_replies():  # replies owed first, then the rest
-            return now + max(out.budget_wait_s(), 0.001)
-        if not scheduler.run_urgent(now, send):
-            return now + max(out.budget_wait_s(), 0.001)
         share = link.share
         if share is not None:
             share.begin(enforced=scheduler.streams_due(now))
-        deadline = self._services_turn(channel, now, share)
+        deadline = self._flush_replies(out, share, now)  # replies owed first, then the rest
+        if deadline is None:
+            if not scheduler.run_urgent(now, send):
+                return now + max(out.budget_wait_s(), 0.001)
+            deadline = self._services_turn(channel, now, share)
         if share is not None and share.waiting:  # owed traffic waits for a full frame: the streams hold back
             streams = now + max(out.budget_wait_s(), 0.001)
         elif scheduler.run_streams(now, send):
@@ -278,6 +279,18 @@ class VehicleNode:
         if streams is not None and (deadline is None or streams < deadline):
             deadline = streams
         return deadline
+
+    @staticmethod
+    def _flush_replies(out, share, now: float) -> float | None:
+        """The queued replies, within `share` as the services' turn; None when all went out, else
+        when to try again."""
+        if not out.replies:
+            return None
+        out.share = share
+        try:
+            return None if out.flush_replies() else now + max(out.budget_wait_s(), 0.001)
+        finally:
+            out.share = None
 
     def _services_turn(self, channel: Channel, now: float, share) -> float | None:
         """STATUSTEXT, then every service's `pending`, charged to `share` (and within it while

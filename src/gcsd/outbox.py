@@ -96,6 +96,14 @@ class Outbox:
 
     # --- budget ----------------------------------------------------------------------------
     def has_room(self, nbytes: int = MAX_FRAME_BYTES) -> bool:
+        return self._room(nbytes, True)
+
+    def fits_now(self, nbytes: int = MAX_FRAME_BYTES) -> bool:
+        """`has_room` for a sender that will not wait for room (an optional copy): in the
+        services' turn its "no" does not hold the streams back."""
+        return self._room(nbytes, False)
+
+    def _room(self, nbytes: int, waits: bool) -> bool:
         budget = self.budget
         if budget is None:
             return True
@@ -103,7 +111,7 @@ class Outbox:
         share = self.share
         if share is None:
             return budget.tokens >= nbytes
-        return share.admits(nbytes, budget.tokens, budget.capacity, self.time.now)
+        return share.admits(nbytes, budget.tokens, budget.capacity, self.time.now, waits)
 
     def budget_wait_s(self, nbytes: int = MAX_FRAME_BYTES) -> float:
         if self.budget is None:

@@ -27,19 +27,21 @@ really used. `set_interval` implements the bucket assignment of `set_ap_message_
 The pass (VehicleNode.send_pass), in order of priority:
 
 1. replies queued in the outbox (ACKs, PARAM_VALUE answers, mission items: owed, client-paced);
+   while some remain, 2 and 3 wait for the next pass;
 2. `run_urgent`: HEARTBEAT and pushed messages;
-3. the services' turn: STATUSTEXT, then each service's `pending` (a parameter list, FTP replies
-   and bursts, log data, mission requests and timers);
+3. STATUSTEXT, then each service's `pending` (a parameter list, FTP replies and bursts, log
+   data, mission requests and timers);
 4. `run_streams`: the buckets.
 
-A link with a byte budget (`bandwidth`; a serial channel's is baud // 10) also has a
-ServiceShare: while streams are due (`streams_due`), the services' turn may spend only
-SERVICE_SHARE (2/3) of the budget's rate, and the streams keep the rest; while a service waits
-for the budget to refill within its share (a whole FTP frame, say), the streams hold back for
-that pass (as ArduPilot reserves room for PARAM_VALUE). With no stream due the services may use
-the whole budget, and with no service waiting the streams do: on a link the streams alone fill
-(the copter's defaults want ~2 000 B/s, a 9 600-baud link has 960) a parameter list, FTP and
-STATUSTEXT still get through, while the streams, slowed ×4 as in ArduPilot, keep about a third.
+1 and 3 are the services' turn. A link with a byte budget (`bandwidth`; a serial channel's is
+baud // 10) also has a ServiceShare: while streams are due (`streams_due`), the services' turn
+may spend only SERVICE_SHARE (2/3) of the budget's rate, and the streams keep the rest; while a
+reply or a service waits for the budget to refill within its share (a whole frame, say), the
+streams hold back for that pass (as ArduPilot reserves room for PARAM_VALUE). With no stream due
+the services may use the whole budget, and with no service waiting the streams do: on a link
+the streams alone fill (the copter's defaults want ~2 000 B/s, a 9 600-baud link has 960) a
+parameter list, FTP, mission items and STATUSTEXT still get through, while the streams (slowed
+×4 during a list, a mission upload or FTP, as in ArduPilot) keep about a third.
 ArduPilot orders it alike: the NEXT_PARAM special slot (queued parameter replies, then ~30 % of
 the bandwidth for a list) ahead of the pushed messages and the buckets, FTP on its own thread
 pacing bursts to a third of the link. A link without a budget has no share: the services simply
@@ -228,20 +230,23 @@ class SendScheduler:
 class ServiceShare:
     """The services' guaranteed share of one link's byte budget (a link with a `bandwidth`).
 
-    A bucket filling at SERVICE_SHARE of the link's rate, as deep as the link's. During the
+    A bucket filling at SERVICE_SHARE of the link's rate, twice as deep as the link's (so a
+    reply or two of a few dozen bytes do not leave it short of the whole frame a reply waits
+    for: the link's budget paces those; the share paces a sustained transfer). During the
     services' turn of every pass the outbox charges it with what the services send (`Outbox.share`;
     never below empty) and, when the streams are due (`begin(enforced=True)`), asks it as well
     as the link's budget: a service may send while its share has room. When the share has room
     but the link has not, the service is `waiting` and the streams hold back for this pass, so
-    owed traffic of a whole frame is not nibbled away by 40-byte stream messages; when the share
-    is spent, the streams have the link. Under contention the services get SERVICE_SHARE of the
-    budget and the streams the rest; with no stream due the services may use all of it, and
-    with no service waiting the streams do.
+    owed traffic of a whole frame is not nibbled away by 40-byte stream messages (an optional
+    copy, skipped when there is no room, asks `Outbox.fits_now` and waits for nothing); when
+    the share is spent, the streams have the link. Under contention the services get
+    SERVICE_SHARE of the budget and the streams the rest; with no stream due the services may
+    use all of it, and with no service waiting the streams do.
     """
 
-    def __init__(self, rate_bps: float, capacity: float, now: float) -> None:
+    def __init__(self, rate_bps: float, link_capacity: float, now: float) -> None:
         self.bucket = TokenBucket(rate_bps * SERVICE_SHARE, now)
-        self.bucket.capacity = self.bucket.tokens = float(capacity)
+        self.bucket.capacity = self.bucket.tokens = 2.0 * link_capacity
         self.enforced = False
         self.waiting = False
 
@@ -250,15 +255,16 @@ class ServiceShare:
         self.enforced = enforced
         self.waiting = False
 
-    def admits(self, nbytes: int, link_tokens: float, link_capacity: float, now: float) -> bool:
-        """May nbytes go now? `link_tokens`: what the link's budget holds at `now`."""
+    def admits(self, nbytes: int, link_tokens: float, link_capacity: float, now: float, waits: bool = True) -> bool:
+        """May nbytes go now? `link_tokens`: what the link's budget holds at `now`; `waits`: the
+        sender will wait for room (False: an optional copy, skipped when there is none)."""
         if not self.enforced:
             return link_tokens >= nbytes
         if self.bucket.wait_s(nbytes, now) > 0.0:
             return False  # the share is spent: the streams' turn
         if link_tokens >= nbytes:
             return True
-        if nbytes <= link_capacity:
+        if waits and nbytes <= link_capacity:
             self.waiting = True  # owed traffic waits for the link to refill: the streams hold back
         return False
 

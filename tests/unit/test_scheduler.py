@@ -218,6 +218,8 @@ def test_an_enforced_share_limits_the_services_to_their_part_of_the_rate():
     share.begin(enforced=True)
     assert share.admits(280, 280.0, DEPTH, 0.0)
     share.charge(280, 0.0)
+    assert share.admits(280, 280.0, DEPTH, 0.0), "twice the link's depth: a burst of two frames"
+    share.charge(280, 0.0)
     assert not share.admits(37, 280.0, DEPTH, 0.0) and not share.waiting, "spent: the streams' turn"
     assert share.wait_s(37, 0.0) == pytest.approx(37 / (RATE * SERVICE_SHARE))
     assert share.admits(37, 280.0, DEPTH, 37 / (RATE * SERVICE_SHARE))  # refilled at 2/3 of the rate
@@ -236,3 +238,9 @@ def test_charges_never_leave_the_share_in_debt():
     share.begin(enforced=True)
     share.charge(10_000, 0.0)  # a sender that did not ask first
     assert share.admits(37, 280.0, DEPTH, 37 / (RATE * SERVICE_SHARE))
+
+
+def test_an_optional_copy_that_finds_no_room_waits_for_nothing():
+    share = ServiceShare(RATE, DEPTH, 0.0)
+    share.begin(enforced=True)
+    assert not share.admits(280, 100.0, DEPTH, 0.0, waits=False) and not share.waiting

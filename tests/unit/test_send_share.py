@@ -128,3 +128,36 @@ def test_a_link_without_a_budget_has_no_share(tmp_path):
     h.send(M.MAVLink_param_request_list_message(1, 1))
     assert h.serve(2.0, until=lambda: len(h.of_type("PARAM_VALUE", mark)) == len(h.node.params))
     assert h.of_type("ATTITUDE", mark), "and the streams in the same window"
+
+
+def test_a_mission_goes_up_and_comes_back_over_a_full_link(radio):
+    """Item by item, each answer awaited as a ground station does: the items are owed replies and
+    go ahead of the streams within the services' share (30 items down in 2.2 s; 5.8 s before,
+    when each waited for the streams to leave a whole frame), the streams keeping the rest."""
+    items = 30
+    mark = radio.mark()
+    radio.send(M.MAVLink_mission_count_message(1, 1, items, M.MAV_MISSION_TYPE_MISSION))
+    for seq in range(items):
+        asked = lambda seq=seq: [m for m in radio.received[mark:] if m.get_type() in (
+            "MISSION_REQUEST", "MISSION_REQUEST_INT") and m.seq == seq]
+        assert radio.serve(2.0, until=asked), f"item {seq} not asked for within 2 s"
+        radio.send(M.MAVLink_mission_item_int_message(1, 1, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                                      M.MAV_CMD_NAV_WAYPOINT, 0, 1, 0, 0, 0, 0,
+                                                      int(-35.36e7) + seq, int(149.16e7), 20.0))
+    assert radio.serve(2.0, until=lambda: radio.of_type("MISSION_ACK", mark))
+    assert radio.of_type("MISSION_ACK", mark)[-1].type == M.MAV_MISSION_ACCEPTED
+    mark, t0 = radio.mark(), radio.t
+    radio.send(M.MAVLink_mission_request_list_message(1, 1, M.MAV_MISSION_TYPE_MISSION))
+    assert radio.serve(2.0, until=lambda: radio.of_type("MISSION_COUNT", mark))
+    assert radio.of_type("MISSION_COUNT", mark)[0].count == items
+    for seq in range(items):
+        radio.send(M.MAVLink_mission_request_int_message(1, 1, seq, M.MAV_MISSION_TYPE_MISSION))
+        got = lambda seq=seq: [m for m in radio.of_type("MISSION_ITEM_INT", mark) if m.seq == seq]
+        assert radio.serve(2.0, until=got), f"item {seq} not sent within 2 s"
+        assert seq == 0 or got()[0].x == int(-35.36e7) + seq  # item 0 is home, as ArduPilot's
+    elapsed = radio.t - t0
+    owed = [m for m in radio.received[mark:] if m.get_type() in ("MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ACK")]
+    assert elapsed < 1.5 * _bytes(owed) / (SERVICE_SHARE * BUDGET_BPS), f"{items} items down in {elapsed:.1f} s"
+    streams = [m for m in radio.received[mark:] if m not in owed and m.get_type() != "HEARTBEAT"]
+    assert _bytes(streams) >= 0.7 * (1 - SERVICE_SHARE) * BUDGET_BPS * elapsed, "the streams' share"
+    assert _bytes(radio.received[mark:]) <= BUDGET_BPS * elapsed + 280, "within the budget"
