@@ -12,6 +12,7 @@
  *                                gaps, exactly as speedups.feed (the reference).
  *   recv_batch(sock, n) -> list  up to n datagrams as [(bytes, (host, port)), ...] from one
  *                                recvmmsg(2); [] when none is waiting; an AF_INET socket only.
+ *   RecentFrames(window_s, max_frames)   dedup.RecentFramesPython: seen, remember, check, len.
  *   send_batch(sock, items) -> int   sendmmsg(2) of [(bytes, (host, port)), ...] on an AF_INET
  *                                socket; how many were sent (a datagram that meets a full buffer
  *                                or an error is dropped and the rest are tried).
@@ -562,6 +563,218 @@ send_batch(PyObject *self, PyObject *args)
     return PyLong_FromSsize_t(ok);
 }
 
+
+/* ------------------------------------------------------------------------------------------- */
+/* RecentFrames: dedup.RecentFramesPython in C, the same states, sweep and bounds (its docstring) */
+
+#define SWEEP_FRACTION 0.125
+
+typedef struct {
+    double t;
+    PyObject *key;
+} Remembered;
+
+typedef struct {
+    PyObject_HEAD
+    PyObject *at;         /* {key: time remembered} */
+    Remembered *ring;     /* FIFO of (time, key), oldest at head */
+    Py_ssize_t head, count, cap;
+    double window_s, sweep_at;
+    Py_ssize_t max_frames, evicted;
+} RecentFramesObject;
+
+static void
+rf_dealloc(RecentFramesObject *self)
+{
+    for (Py_ssize_t k = 0; k < self->count; k++)
+        Py_DECREF(self->ring[(self->head + k) % self->cap].key);
+    PyMem_Free(self->ring);
+    Py_XDECREF(self->at);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static int
+rf_init(RecentFramesObject *self, PyObject *args, PyObject *kwds)
+{
+    static char *kwlist[] = {"window_s", "max_frames", NULL};
+    double window_s;
+    Py_ssize_t max_frames = 65536;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "d|n", kwlist, &window_s, &max_frames))
+        return -1;
+    if (!(window_s > 0) || max_frames < 1) {
+        PyErr_SetString(PyExc_ValueError, "window_s must be > 0 and max_frames >= 1");
+        return -1;
+    }
+    if (self->at != NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "RecentFrames is initialised once");
+        return -1;
+    }
+    self->at = PyDict_New();
+    if (self->at == NULL)
+        return -1;
+    self->window_s = window_s;
+    self->max_frames = max_frames;
+    self->sweep_at = -Py_HUGE_VAL;
+    return 0;
+}
+
+static int
+rf_push(RecentFramesObject *self, double t, PyObject *key)
+{
+    if (self->count == self->cap) {
+        Py_ssize_t cap = self->cap ? self->cap * 2 : 64;
+        Remembered *ring = PyMem_New(Remembered, cap);
+        if (ring == NULL) {
+            PyErr_NoMemory();
+            return -1;
+        }
+        for (Py_ssize_t k = 0; k < self->count; k++)
+            ring[k] = self->ring[(self->head + k) % self->cap];
+        PyMem_Free(self->ring);
+        self->ring = ring;
+        self->cap = cap;
+        self->head = 0;
+    }
+    Py_INCREF(key);
+    self->ring[(self->head + self->count) % self->cap] = (Remembered){t, key};
+    self->count++;
+    return 0;
+}
+
+static int
+rf_expire(RecentFramesObject *self, double now)
+{
+    double horizon = now - self->window_s;
+    self->sweep_at = now + self->window_s * SWEEP_FRACTION;
+    while (self->count > 0) {
+        Remembered *front = &self->ring[self->head];
+        if (!(front->t <= horizon || PyDict_GET_SIZE(self->at) > self->max_frames))
+            break;
+        Remembered r = *front;
+        self->head = (self->head + 1) % self->cap;
+        self->count--;
+        PyObject *cur = PyDict_GetItemWithError(self->at, r.key);
+        int rc = 0;
+        if (cur != NULL && PyFloat_AS_DOUBLE(cur) == r.t) {
+            rc = PyDict_DelItem(self->at, r.key);
+            if (r.t > horizon)
+                self->evicted++;
+        } else if (cur == NULL && PyErr_Occurred()) {
+            rc = -1;
+        }
+        Py_DECREF(r.key);
+        if (rc < 0)
+            return -1;
+    }
+    return 0;
+}
+
+static int
+rf_seen(RecentFramesObject *self, PyObject *raw, double now)
+{
+    PyObject *at = PyDict_GetItemWithError(self->at, raw);
+    if (at == NULL)
+        return PyErr_Occurred() ? -1 : 0;
+    return now - PyFloat_AS_DOUBLE(at) < self->window_s;
+}
+
+static int
+rf_remember(RecentFramesObject *self, PyObject *raw, double now)
+{
+    PyObject *t = PyFloat_FromDouble(now);
+    if (t == NULL)
+        return -1;
+    int rc = PyDict_SetItem(self->at, raw, t);
+    Py_DECREF(t);
+    if (rc < 0 || rf_push(self, now, raw) < 0)
+        return -1;
+    if (now >= self->sweep_at || PyDict_GET_SIZE(self->at) > self->max_frames)
+        return rf_expire(self, now);
+    return 0;
+}
+
+static int
+rf_args(PyObject *const *args, Py_ssize_t nargs, double *now)
+{
+    if (nargs != 2) {
+        PyErr_SetString(PyExc_TypeError, "expected (raw, now)");
+        return -1;
+    }
+    *now = PyFloat_AsDouble(args[1]);
+    return (*now == -1.0 && PyErr_Occurred()) ? -1 : 0;
+}
+
+static PyObject *
+rf_seen_m(RecentFramesObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    double now;
+    if (rf_args(args, nargs, &now) < 0)
+        return NULL;
+    int r = rf_seen(self, args[0], now);
+    return r < 0 ? NULL : PyBool_FromLong(r);
+}
+
+static PyObject *
+rf_remember_m(RecentFramesObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    double now;
+    if (rf_args(args, nargs, &now) < 0 || rf_remember(self, args[0], now) < 0)
+        return NULL;
+    Py_RETURN_NONE;
+}
+
+static PyObject *
+rf_check_m(RecentFramesObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    double now;
+    if (rf_args(args, nargs, &now) < 0)
+        return NULL;
+    int r = rf_seen(self, args[0], now);
+    if (r < 0)
+        return NULL;
+    if (r)
+        Py_RETURN_TRUE;
+    if (rf_remember(self, args[0], now) < 0)
+        return NULL;
+    Py_RETURN_FALSE;
+}
+
+static Py_ssize_t
+rf_len(RecentFramesObject *self)
+{
+    return self->at ? PyDict_GET_SIZE(self->at) : 0;
+}
+
+static PyMethodDef rf_methods[] = {
+    {"seen", (PyCFunction)(void (*)(void))rf_seen_m, METH_FASTCALL, "seen(raw, now) -> bool"},
+    {"remember", (PyCFunction)(void (*)(void))rf_remember_m, METH_FASTCALL, "remember(raw, now)"},
+    {"check", (PyCFunction)(void (*)(void))rf_check_m, METH_FASTCALL, "check(raw, now) -> bool (a duplicate)"},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyMemberDef rf_members[] = {
+    {"window_s", T_DOUBLE, offsetof(RecentFramesObject, window_s), READONLY, NULL},
+    {"max_frames", T_PYSSIZET, offsetof(RecentFramesObject, max_frames), READONLY, NULL},
+    {"evicted", T_PYSSIZET, offsetof(RecentFramesObject, evicted), 0, NULL},
+    {NULL, 0, 0, 0, NULL},
+};
+
+static PySequenceMethods rf_as_sequence = {.sq_length = (lenfunc)rf_len};
+
+static PyTypeObject RecentFramesType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "gcsd._speedups.RecentFrames",
+    .tp_basicsize = sizeof(RecentFramesObject),
+    .tp_dealloc = (destructor)rf_dealloc,
+    .tp_as_sequence = &rf_as_sequence,
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "dedup.RecentFramesPython in C",
+    .tp_methods = rf_methods,
+    .tp_members = rf_members,
+    .tp_init = (initproc)rf_init,
+    .tp_new = PyType_GenericNew,
+};
+
 /* ------------------------------------------------------------------------------------------- */
 
 static PyMethodDef methods[] = {
@@ -591,7 +804,16 @@ PyInit__speedups(void)
     INTERN(s_seq_gaps, "seq_gaps");
 #undef INTERN
     empty_bytes = PyBytes_FromStringAndSize(NULL, 0);
-    if (empty_bytes == NULL)
+    if (empty_bytes == NULL || PyType_Ready(&RecentFramesType) < 0)
         return NULL;
-    return PyModule_Create(&module);
+    PyObject *m = PyModule_Create(&module);
+    if (m == NULL)
+        return NULL;
+    Py_INCREF(&RecentFramesType);
+    if (PyModule_AddObject(m, "RecentFrames", (PyObject *)&RecentFramesType) < 0) {
+        Py_DECREF(&RecentFramesType);
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
 }

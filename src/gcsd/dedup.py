@@ -31,19 +31,25 @@ sequence number that wrapped in step with it: exactly 256 x k frames a second fr
 source) can never be taken for its own echo and lost.
 
 Cost (bench/dedup_cost.py, bench/RESULTS.md): a lookup is one dict probe on the frame's bytes;
-remembering adds a dict store, a deque append and the amortised expiry.
+remembering adds a dict store, a deque append and the amortised expiry. Every routed frame pays
+them, so the same class is also in C (gcsd._speedups.RecentFrames, used when built).
 """
 
 from __future__ import annotations
 
 from collections import deque
 
+from . import speedups
+
 LOOP_WINDOW_S = 0.5
 MAX_FRAMES = 65536  # 0.5 s of 130 000 frames/s, four times what one process routes
 SWEEP_FRACTION = 0.125  # expired keys are swept out every eighth of a window
 
 
-class RecentFrames:
+class RecentFramesPython:
+    """The reference; `RecentFrames` is the compiled one when gcsd._speedups is built (the unit
+    tests run both, and compare them on random sequences)."""
+
     __slots__ = ("_at", "_order", "_sweep_at", "evicted", "max_frames", "window_s")
 
     def __init__(self, window_s: float, max_frames: int = MAX_FRAMES) -> None:
@@ -94,3 +100,6 @@ class RecentFrames:
             return True
         self.remember(raw, now)
         return False
+
+
+RecentFrames = speedups.compiled.RecentFrames if speedups.compiled is not None else RecentFramesPython

@@ -1,10 +1,26 @@
-"""RecentFrames (dedup.py): exact bytes remembered for exactly window_s, bounded, on a float clock."""
+"""RecentFrames (dedup.py): exact bytes remembered for exactly window_s, bounded, on a float clock.
+Every test runs on both implementations (Python, and C when gcsd._speedups is built);
+tests/unit/test_speedups.py compares them on random sequences."""
 
 from __future__ import annotations
 
 import pytest
 
-from gcsd.dedup import LOOP_WINDOW_S, RecentFrames
+from gcsd import dedup, speedups
+from gcsd.dedup import LOOP_WINDOW_S
+
+IMPLEMENTATIONS = [
+    pytest.param(dedup.RecentFramesPython, id="python"),
+    pytest.param(speedups.compiled.RecentFrames if speedups.compiled else None, id="c",
+                 marks=pytest.mark.skipif(speedups.compiled is None, reason="gcsd._speedups is not built")),
+]
+RecentFrames = dedup.RecentFrames
+
+
+@pytest.fixture(autouse=True, params=IMPLEMENTATIONS)
+def implementation(request, monkeypatch):
+    monkeypatch.setitem(globals(), "RecentFrames", request.param)
+    return request.param
 
 A, B = b"\xfd\x01frame-a", b"\xfd\x01frame-b"
 
@@ -66,3 +82,4 @@ def test_a_window_or_bound_that_holds_nothing_is_refused(window_s, max_frames):
 
 def test_the_loop_window_is_shorter_than_a_heartbeat_period():
     assert 0 < LOOP_WINDOW_S < 1.0
+

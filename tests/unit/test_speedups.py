@@ -4,6 +4,8 @@
   garbage between them, cut into random chunks, through both parsers: the same frames (every
   slot), the same counters, the same per-source sequence table, the same held bytes, the same
   bad-CRC frames kept.
+- RecentFrames: random sequences of seen / remember / check on both, the same answers, sizes and
+  evictions.
 - recv_batch: real UDP sockets on 127.0.0.1: order, sizes up to the largest datagram, two
   senders' addresses, the batch limit, nothing waiting, an ICMP error reported and then the data.
 """
@@ -21,7 +23,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd import codec, speedups
+from gcsd import codec, dedup, speedups
 from gcsd.codec import Encoder, FrameParser
 
 needs_c = pytest.mark.skipif(speedups.compiled is None, reason="gcsd._speedups is not built")
@@ -271,3 +273,27 @@ def test_an_ipv6_socket_is_written_by_the_python_sender(udp):
     except OSError:
         pytest.skip("no IPv6 loopback")
     assert speedups.sender(s6) is speedups.send_batch_python
+
+
+# --- RecentFrames (dedup.py) -------------------------------------------------------------------
+
+_OPS = st.lists(st.tuples(st.sampled_from(["seen", "remember", "check"]), st.integers(0, 5),
+                          st.floats(0, 0.4, allow_nan=False)), max_size=60)
+
+
+@needs_c
+@settings(max_examples=300, deadline=None)
+@given(_OPS, st.floats(0.05, 1.0), st.integers(1, 6))
+def test_the_compiled_recent_frames_answer_as_the_python_ones(ops, window_s, max_frames):
+    py = dedup.RecentFramesPython(window_s, max_frames)
+    c = speedups.compiled.RecentFrames(window_s, max_frames)
+    now = 0.0
+    for op, key, dt in ops:
+        now += dt
+        raw = b"frame-%d" % key
+        assert getattr(c, op)(raw, now) == getattr(py, op)(raw, now), (op, key, now)
+        assert (len(c), c.evicted) == (len(py), py.evicted)
+
+
+def test_the_compiled_recent_frames_are_used_when_built():
+    assert dedup.RecentFrames is (speedups.compiled.RecentFrames if speedups.compiled else dedup.RecentFramesPython)
