@@ -6,8 +6,9 @@ Run: ``python -m bench.route_split [REV ...]`` (default: HEAD; about 40 s a revi
 (``pip install py-spy``). Each REV is exported with `git archive` (gcsd._speedups built in the
 export when the revision has it, as ``pip install -e .`` would: routers.export_gcsd_rev).
 
-Components, by the innermost gcsd function of a sample: parse (codec: FrameParser.feed and what it
-calls, C included), loop protection and dedup (dedup.py), the HTTP API's tap (http/), the routing
+Components, by the innermost gcsd function of a sample (py-spy --native: the C functions of
+gcsd._speedups have frames of their own): parse (codec: FrameParser.feed and what it calls, C
+included), loop protection and dedup (dedup.py), the HTTP API's tap (http/), the routing
 decision (router.py), the outbox and the peer's writer (outbox.py), and the rest of the receive
 path (channel.py Channel.receive, gcs.py GCS.on_frame: attribute reads, calls, the error boundary).
 """
@@ -26,8 +27,8 @@ from bench.routers import export_gcsd_rev
 
 REPO = Path(__file__).resolve().parent.parent
 COMPONENTS = (
-    ("parse", ("gcsd/codec.py",)),
-    ("loop protection (dedup)", ("gcsd/dedup.py",)),
+    ("loop protection (dedup)", ("gcsd/dedup.py", "rf_")),  # rf_*: its C class in _speedups.c
+    ("parse", ("gcsd/codec.py", "gcsd/_speedups.c")),  # feed and its helpers in C
     ("HTTP API tap", ("gcsd/http/",)),
     ("routing decision", ("gcsd/router.py",)),
     ("outbox and writer", ("gcsd/outbox.py", "bench/route_cost.py")),
@@ -39,8 +40,8 @@ def _component(stack: list[str]) -> str | None:
     if not any("Channel.receive" in f for f in stack):
         return None  # set-up, imports: not the routed frame
     for frame in reversed(stack):
-        for name, files in COMPONENTS:
-            if any(f in frame for f in files):
+        for name, marks in COMPONENTS:
+            if any(frame.startswith(m) if m.endswith("_") else m in frame for m in marks):
                 return name
     return "other"
 
@@ -49,7 +50,7 @@ def split(src: Path, workdir: Path) -> tuple[float, dict[str, float]]:
     env = {"PYTHONPATH": str(src), "PATH": "/usr/bin:/bin"}
     raw = workdir / "samples.txt"
     spy = shutil.which("py-spy") or str(Path(sys.executable).parent / "py-spy")
-    out = subprocess.run([spy, "record", "-r", "1000", "-f", "raw", "-o", str(raw), "--", sys.executable, "-m",
+    out = subprocess.run([spy, "record", "-r", "1000", "--native", "-f", "raw", "-o", str(raw), "--", sys.executable, "-m",
                           "bench.route_cost"], cwd=REPO, env=env, capture_output=True, text=True, check=True)
     per_frame = float(re.search(r"20 routes:\s+([\d.]+) us per routed frame", out.stdout).group(1))
     counts: collections.Counter[str] = collections.Counter()
