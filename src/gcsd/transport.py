@@ -106,7 +106,11 @@ class _Datagram:
             return
         items = pending.copy()
         pending.clear()
-        sent = self._send_batch(self.sock, items)
+        try:
+            sent = self._send_batch(self.sock, items)
+        except (OSError, TypeError, ValueError, OverflowError) as exc:  # an address sendto would refuse too
+            log.warning("udp_send_failed", channel=self.channel.name, datagrams=len(items), error=str(exc))
+            sent = 0
         if sent < len(items):
             self.channel.stats.drops += len(items) - sent
 
