@@ -174,6 +174,22 @@ def pump(clients: Iterable[Client], seconds: float) -> None:
         c.read_available()
 
 
+def pump_until(clients: Iterable[Client], done: Callable[[], bool], at_least_s: float = 0.0,
+               timeout_s: float = 10.0) -> bool:
+    """Read every client for `at_least_s` (the window a "nothing arrived" check needs), then on
+    until `done()` holds or `timeout_s` (from the start) has passed; returns `done()`. A positive
+    control that a loaded machine delays is awaited instead of being expected within the window."""
+    clients = list(clients)
+    start = time.monotonic()
+    pump(clients, at_least_s)
+    while not done():
+        left = start + timeout_s - time.monotonic()
+        if left <= 0:
+            return done()
+        pump(clients, min(left, 0.05))
+    return True
+
+
 def wait_for(client: Client, match: Callable[[Received], bool], timeout: float = 3.0,
              since: int = 0, others: Iterable[Client] = ()) -> Received | None:
     """Read (also `others`) until `client` has received a frame matching `match` after mark `since`."""

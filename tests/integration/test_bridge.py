@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from .bridge import NullModem, bridge_configs
-from .helpers import Client, M, is_type, pump, udp_url, wait_for
+from .helpers import Client, M, is_type, pump, pump_until, udp_url, wait_for
 
 FC = (1, 1)
 COMPANION = (1, 191)
@@ -25,18 +25,24 @@ def bridge(daemon, tmp_path):
     modem.close()
 
 
-def heartbeat_sources(c: Client, seconds: float = 2.5) -> dict[tuple[int, int], int]:
-    c.heartbeat()
-    pump([c], seconds)
+def heartbeat_sources(c: Client) -> dict[tuple[int, int], int]:
     return {r.src: r.msg.type for r in c.received if r.type == "HEARTBEAT"}
+
+
+def served_by_the_flight_controller(c: Client) -> None:
+    """c's heartbeat read by the companion (its UDP servers answer only peers they have read) and
+    the flight controller's route known to it (its frames reach c), awaited, not assumed."""
+    c.heartbeat()
+    assert wait_for(c, lambda r: r.src == FC, timeout=10.0), "nothing from the flight controller"
 
 
 def test_ground_stations_see_the_flight_controller_and_the_companion(bridge, client):
     g1 = client(udp_url(bridge.port("gcs1")), 255, 190)
     g2 = client(udp_url(bridge.port("gcs2")), 254, 190)
-    g1.heartbeat()
-    pump([g1, g2], 0.3)
+    served_by_the_flight_controller(g1)  # gcs1 has a peer before g2's heartbeat is routed to it
     g2.heartbeat()  # ground stations heartbeat at 1 Hz; this one reaches gcs1, now active
+    wanted = {FC, COMPANION, (254, 190)}
+    pump_until([g1, g2], lambda: wanted <= set(heartbeat_sources(g1)))
     seen = heartbeat_sources(g1)
     assert seen[FC] == M.MAV_TYPE_QUADROTOR
     assert seen[COMPANION] == M.MAV_TYPE_ONBOARD_CONTROLLER
@@ -45,11 +51,18 @@ def test_ground_stations_see_the_flight_controller_and_the_companion(bridge, cli
 
 def test_flight_controller_parameters_through_the_router(bridge, client):
     g1 = client(udp_url(bridge.port("gcs1")), 255, 190)
-    g1.heartbeat()
-    pump([g1], 1.0)
+    served_by_the_flight_controller(g1)
     mark = g1.mark()
     g1.send(M.MAVLink_param_request_list_message(*FC))
-    pump([g1], 4.0)
+
+    def complete() -> bool:
+        values = g1.since(mark, "PARAM_VALUE")
+        return bool(values) and len({r.msg.param_index for r in values}) >= values[0].msg.param_count
+
+    # the whole list is awaited, however long a loaded machine takes, then 1 s more for any
+    # answer from another component
+    pump_until([g1], complete, timeout_s=20.0)
+    pump([g1], 1.0)
     values = [r for r in g1.since(mark, "PARAM_VALUE")]
     assert values and {r.src for r in values} == {FC}, "only the flight controller answers its list"
     assert len({r.msg.param_index for r in values}) == values[0].msg.param_count
@@ -63,7 +76,7 @@ def test_flight_controller_parameters_through_the_router(bridge, client):
 def test_companion_component_answers_for_itself_on_the_same_link(bridge, client):
     g2 = client(udp_url(bridge.port("gcs2")), 254, 190)
     g2.heartbeat()
-    pump([g2], 1.0)
+    assert wait_for(g2, lambda r: r.src == COMPANION), "the companion does not serve gcs2"
     mark = g2.mark()
     g2.send(M.MAVLink_param_request_read_message(*COMPANION, b"SYSID_THISMAV", -1))
     r = wait_for(g2, is_type("PARAM_VALUE"), since=mark, timeout=3)
@@ -76,8 +89,7 @@ def test_companion_component_answers_for_itself_on_the_same_link(bridge, client)
 
 def test_flight_controller_mission_through_the_router(bridge, client):
     g1 = client(udp_url(bridge.port("gcs1")), 255, 190)
-    g1.heartbeat()
-    pump([g1], 1.0)
+    served_by_the_flight_controller(g1)
     items = [
         M.MAVLink_mission_item_int_message(*FC, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_CMD_NAV_WAYPOINT,
                                            0, 1, 0, 0, 0, 0, int(-35.36e7) + seq * 1000, int(149.16e7), 30.0)

@@ -48,7 +48,8 @@ def test_a_reply_goes_only_to_the_requesting_channel_targeted_at_the_requester(d
     b = client(udp_url(d.port("b")), sysid=254, compid=191)
     for c in (a, b):
         c.heartbeat()
-    pump([a, b], 0.3)
+    for c in (a, b):  # both read (a UDP server answers only a peer it has read)
+        assert wait_for(c, lambda r: r.src == VEHICLE, others=[a, b]), "a station's heartbeat was not read"
     mark_a, mark_b = a.mark(), b.mark()
     ftp_request(a, Op.LIST_DIRECTORY, b"/", seq=41)
     assert wait_for(a, is_type("FILE_TRANSFER_PROTOCOL", VEHICLE), since=mark_a) is not None

@@ -82,7 +82,10 @@ def test_set_is_confirmed_to_every_ground_station_and_survives_a_restart(daemon,
     a = client(udp_url(d.port("a")), 255, 190)
     b = client(udp_url(d.port("b")), 254, 190)
     a.heartbeat(), b.heartbeat()
-    pump([a, b], 0.3)
+    # the echo goes to the channels with a peer: b's heartbeat is awaited as read (a UDP server
+    # answers only a peer it has read), not assumed read 0.3 s later
+    for c in (a, b):
+        assert wait_for(c, lambda r: r.src == VEHICLE, others=[a, b]), "a station's heartbeat was not read"
     mark_b = b.mark()
     mark_a = set_param(a, "RC1_TRIM", 1512.0, M.MAV_PARAM_TYPE_INT16)
     for c, mark in ((a, mark_a), (b, mark_b)):

@@ -231,7 +231,9 @@ def test_forwarded_frames_keep_their_signature(daemon, client, tmp_path):
     sign(b, KEY, link_id=4)
     b.heartbeat(M.MAV_TYPE_ONBOARD_CONTROLLER)
     a.heartbeat()
-    pump([a, b], 0.5)
+    # a UDP server answers only a peer it has read: b's heartbeat (and so its route) is in
+    for c in (a, b):
+        assert wait_for(c, lambda r: r.src == (1, 1), others=[a, b]), "a station's heartbeat was not read"
     mark = b.mark()
     raw = a.command_long(M.MAV_CMD_REQUEST_MESSAGE, 1, target=(77, 1))
     got = wait_for(b, lambda r: r.raw == raw, since=mark)
