@@ -18,7 +18,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.mission import MissionItem
 
-from .helpers import VEHICLE, is_ack, is_type, pump, udp_channel, udp_url, wait_for
+from .helpers import VEHICLE, is_ack, is_type, udp_channel, udp_url, wait_for
 from .mission_client import LossyProxy, MissionClient
 
 HOME_ITEM = MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 1, 1, 0, 0, 0, 0,
@@ -185,10 +185,8 @@ def test_legacy_mission_item_and_mission_request_work_with_warnings(gcs):
     float32_deg = 1e-5  # MISSION_ITEM carries degrees as float32: about 4e-6 degree steps here
     assert item.msg.x == pytest.approx(RALLY_PLAN[1].x / 1e7, abs=float32_deg)
     assert item.msg.y == pytest.approx(RALLY_PLAN[1].y / 1e7, abs=float32_deg)
-    pump([c], 0.3)
-    texts = [r.msg.text for r in c.since(mark, "STATUSTEXT")]
-    assert "got MISSION_ITEM; GCS should send MISSION_ITEM_INT" in texts
-    assert "got MISSION_REQUEST; use MISSION_REQUEST_INT!" in texts
+    for text in ("got MISSION_ITEM; GCS should send MISSION_ITEM_INT", "got MISSION_REQUEST; use MISSION_REQUEST_INT!"):
+        assert wait_for(c, lambda r, t=text: r.type == "STATUSTEXT" and r.msg.text == t, since=mark), text
     for got, sent in zip(mc.download(2), RALLY_PLAN, strict=True):  # degrees x 1e7, within float32's steps
         assert abs(got.x - sent.x) <= 100 and abs(got.y - sent.y) <= 100
         assert got == MissionItem(sent.command, sent.frame, sent.current, sent.autocontinue, sent.param1,

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from .helpers import pump, udp_channel, udp_url, wait_for
+from .helpers import pump, pump_until, udp_channel, udp_url, wait_for
 
 COUNT = 20
 
@@ -23,9 +23,15 @@ def test_one_udp_server_shows_twenty_systems_and_each_answers_only_for_itself(da
     d = daemon({"vehicle": {"count": COUNT}, "channels": [udp_channel("gcs")]})
     gcs = client(udp_url(d.port("gcs")))
     gcs.heartbeat()
-    pump([gcs], 2.5)
-    systems = {r.src[0] for r in gcs.since(0, "HEARTBEAT")}
-    assert systems == set(range(1, COUNT + 1))
+    everyone = set(range(1, COUNT + 1))
+
+    def sources(kind: str) -> set[int]:
+        return {r.src[0] for r in gcs.since(0, kind)}
+
+    # 2.5 s (two HEARTBEATs of each), and on until all twenty were heard, however loaded the machine
+    pump_until([gcs], lambda: sources("HEARTBEAT") >= everyone and sources("GLOBAL_POSITION_INT") >= everyone,
+               at_least_s=2.5)
+    assert sources("HEARTBEAT") == everyone
     positions = {r.src[0]: (r.msg.lat, r.msg.lon) for r in gcs.since(0, "GLOBAL_POSITION_INT")}
     assert len(set(positions.values())) == COUNT  # each starts on its own spot
 
@@ -45,26 +51,35 @@ def test_one_udp_server_shows_twenty_systems_and_each_answers_only_for_itself(da
     gcs.command_long(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, target=(3, 1))
     ack = wait_for(gcs, lambda r: r.type == "COMMAND_ACK" and r.msg.command == M.MAV_CMD_COMPONENT_ARM_DISARM, 3.0, mark)
     assert ack is not None and ack.src == (3, 1) and ack.msg.result == M.MAV_RESULT_ACCEPTED
-    pump([gcs], 1.5)
-    armed = {r.src[0] for r in gcs.since(mark, "HEARTBEAT") if r.msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED}
-    assert armed == {3}
+    after = gcs.mark()
+
+    def armed() -> set[int]:
+        return {r.src[0] for r in gcs.since(mark, "HEARTBEAT") if r.msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED}
+
+    # until vehicle 3 shows itself armed and every vehicle has sent a HEARTBEAT since the ACK
+    pump_until([gcs], lambda: 3 in armed() and {r.src[0] for r in gcs.since(after, "HEARTBEAT")} >= everyone,
+               at_least_s=1.5)
+    assert armed() == {3}
     assert (tmp_path / "state" / "vehicle-7" / "mav.parm").read_text().count("WPNAV_SPEED") == 1
     assert "WPNAV_SPEED" not in (tmp_path / "state" / "vehicle-8" / "mav.parm").read_text()
 
 
-def _heartbeat_sysids(gcs, seconds: float = 2.5) -> set[int]:
+def _heartbeat_sysids(gcs, expected: set[int], seconds: float = 2.5) -> set[int]:
+    """The systems heard in `seconds` (two HEARTBEATs of each), or until `expected` were all heard."""
     gcs.heartbeat()
     mark = gcs.mark()
-    pump([gcs], seconds)
+    pump_until([gcs], lambda: {r.src[0] for r in gcs.since(mark, "HEARTBEAT")} >= expected, at_least_s=seconds)
     return {r.src[0] for r in gcs.since(mark, "HEARTBEAT")}
 
 
-def _set(gcs, sysid: int, name: str, value: float):
-    """PARAM_SET to a vehicle: its PARAM_VALUE answer (and the STATUSTEXTs meanwhile)."""
+def _set(gcs, sysid: int, name: str, value: float, text: str | None = None):
+    """PARAM_SET to a vehicle: its PARAM_VALUE answer and its STATUSTEXTs meanwhile; with `text`,
+    until a STATUSTEXT containing it has come (it may follow the answer)."""
     mark = gcs.mark()
     gcs.send(M.MAVLink_param_set_message(sysid, 1, name.encode(), value, M.MAV_PARAM_TYPE_REAL32))
     echo = wait_for(gcs, lambda r: r.type == "PARAM_VALUE" and _name(r.msg.param_id) == name, 3.0, mark)
-    pump([gcs], 0.2)
+    if text is not None:
+        wait_for(gcs, lambda r: r.type == "STATUSTEXT" and r.src == (sysid, 1) and text in r.msg.text, 3.0, mark)
     return echo, [r.msg.text for r in gcs.since(mark, "STATUSTEXT") if r.src == (sysid, 1)]
 
 
@@ -74,13 +89,13 @@ def test_a_swarm_refuses_a_sysid_another_vehicle_has_and_a_saved_clash_falls_bac
     conf = {"vehicle": {"count": 3}, "state_dir": str(tmp_path / "st"), "channels": [udp_channel("gcs")]}
     d = daemon(conf)
     gcs = client(udp_url(d.port("gcs")))
-    assert _heartbeat_sysids(gcs) == {1, 2, 3}
-    echo, texts = _set(gcs, 1, "SYSID_THISMAV", 2.0)
+    assert _heartbeat_sysids(gcs, {1, 2, 3}) == {1, 2, 3}
+    echo, texts = _set(gcs, 1, "SYSID_THISMAV", 2.0, text="refused")
     assert echo.src == (1, 1) and echo.msg.param_value == 1.0, "refused: the old value back"
     assert "SYSID_THISMAV 2 refused: another vehicle's sysid" in texts
     echo, _ = _set(gcs, 3, "SYSID_THISMAV", 7.0)  # the control: a free sysid is taken (next start)
     assert echo.src == (3, 1) and echo.msg.param_value == 7.0
-    echo, texts = _set(gcs, 1, "SYSID_THISMAV", 7.0)  # vehicle 3's from its next start
+    echo, texts = _set(gcs, 1, "SYSID_THISMAV", 7.0, text="refused")  # vehicle 3's from its next start
     assert echo.msg.param_value == 1.0 and any("refused" in t for t in texts)
     echo, _ = _set(gcs, 1, "WPNAV_SPEED", 777.0)
     assert echo.msg.param_value == 777.0
@@ -88,14 +103,14 @@ def test_a_swarm_refuses_a_sysid_another_vehicle_has_and_a_saved_clash_falls_bac
 
     d = daemon(conf)
     gcs = client(udp_url(d.port("gcs")))
-    assert _heartbeat_sysids(gcs) == {1, 2, 7}
+    assert _heartbeat_sysids(gcs, {1, 2, 7}) == {1, 2, 7}
     d.stop()
     saved = tmp_path / "st" / "vehicle-1" / "mav.parm"  # a clash saved by an older gcsd
     saved.write_text(saved.read_text() + "SYSID_THISMAV 2\n")
     capfd.readouterr()
     d = daemon(conf)
     gcs = client(udp_url(d.port("gcs")))
-    assert _heartbeat_sysids(gcs) == {1, 2, 7}, "vehicle 1 falls back to its configured sysid"
+    assert _heartbeat_sysids(gcs, {1, 2, 7}) == {1, 2, 7}, "vehicle 1 falls back to its configured sysid"
     assert "sysid_fallback" in capfd.readouterr().out
     mark = gcs.mark()
     gcs.send(M.MAVLink_param_request_read_message(1, 1, b"WPNAV_SPEED", -1))
