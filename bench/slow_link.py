@@ -20,6 +20,12 @@ Client (this process, the PTY's master side, pymavlink): HEARTBEATs until the ve
    first OpenFileRO to the last byte; the streams' bytes per second in that window; the file is
    decoded with MAVProxy's param.pck reader's format (count of parameters checked).
 
+4. ``mission``: a 30-waypoint mission uploaded (MISSION_COUNT, each MISSION_REQUEST answered
+   with its MISSION_ITEM_INT at once, until the MISSION_ACK) and downloaded again
+   (MISSION_REQUEST_LIST, then one MISSION_REQUEST_INT per item, each sent when the previous
+   item arrived, as MAVProxy and QGroundControl do); each time, and the streams' bytes per
+   second during the download. A request not answered within 2 s is sent again.
+
 A step that does not finish within its limit (300 s) is reported as such. Times are the client's
 monotonic clock (the reader wakes every 0.1 s at most).
 
@@ -56,7 +62,8 @@ QUIET_S = 2.0
 BLOCK = 239
 OP_TERMINATE, OP_OPEN_RO, OP_BURST, ACK, NAK = 1, 4, 15, 128, 129
 HDR = struct.Struct("<HBBBBBxI")
-NOT_STREAMS = ("PARAM_VALUE", "HEARTBEAT", "STATUSTEXT", "FILE_TRANSFER_PROTOCOL")
+NOT_STREAMS = ("PARAM_VALUE", "HEARTBEAT", "STATUSTEXT", "FILE_TRANSFER_PROTOCOL", "MISSION_COUNT", "MISSION_ITEM_INT",
+               "MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK")
 
 
 class Line:
@@ -205,20 +212,79 @@ def param_pck(line: Line) -> dict:
             "streams_bps": streams, "heartbeat_bps": beats}
 
 
+def _await(line: Line, seen: int, match, resend, limit_s: float):
+    """The first message since `seen` that matches, calling resend() every 2 s without one."""
+    start, sent = time.monotonic(), time.monotonic()
+    while time.monotonic() - start < limit_s:
+        line.read(0.1)
+        found = [m for _, m in line.msgs[seen:] if m.get_srcSystem() == VEHICLE[0] and match(m)]
+        if found:
+            return found[0]
+        if time.monotonic() - sent > QUIET_S:
+            resend()
+            sent = time.monotonic()
+    return None
+
+
+def mission(line: Line, items: int = 30) -> dict:
+    def request(seq: int) -> None:
+        line.send(M.MAVLink_mission_request_int_message(*VEHICLE, seq, M.MAV_MISSION_TYPE_MISSION))
+
+    start = time.monotonic()
+    count = M.MAVLink_mission_count_message(*VEHICLE, items, M.MAV_MISSION_TYPE_MISSION)
+    seen = len(line.msgs)
+    line.send(count)
+    done = set()
+    ack = None
+    while ack is None and time.monotonic() - start < LIMIT_S:
+        m = _await(line, seen, lambda m: m.get_type() in ("MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"),
+                   lambda: None, QUIET_S * 4)
+        if m is None:
+            break
+        seen = len(line.msgs)
+        if m.get_type() == "MISSION_ACK":
+            ack = m.type
+            break
+        done.add(m.seq)
+        line.send(M.MAVLink_mission_item_int_message(*VEHICLE, m.seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                                     M.MAV_CMD_NAV_WAYPOINT, 0, 1, 0, 0, 0, 0,
+                                                     int(-35.36e7) + m.seq, int(149.16e7), 20.0))
+    up_s = time.monotonic() - start
+    mark, start = len(line.msgs), time.monotonic()
+    seen = mark
+    listing = M.MAVLink_mission_request_list_message(*VEHICLE, M.MAV_MISSION_TYPE_MISSION)
+    line.send(listing)
+    got = _await(line, seen, lambda m: m.get_type() == "MISSION_COUNT", lambda: line.send(listing), LIMIT_S)
+    received = 0
+    for seq in range(got.count if got is not None else 0):
+        seen = len(line.msgs)
+        request(seq)
+        item = _await(line, seen, lambda m, seq=seq: m.get_type() == "MISSION_ITEM_INT" and m.seq == seq,
+                      lambda seq=seq: request(seq), LIMIT_S)
+        if item is None:
+            break
+        received += 1
+    down_s = time.monotonic() - start
+    streams, beats = _rates(line, mark, down_s)
+    return {"items": items, "up_ack": ack, "up_s": up_s, "down_items": received, "down_s": down_s,
+            "streams_bps": streams, "heartbeat_bps": beats}
+
+
 def measure(workdir: Path, env: dict | None) -> dict:
     line = Line()
     cfg = gcsd_config(workdir, [f'{{name: radio, type: serial, device: "{line.path}", baud: {BAUD}}}'])
     server = start_gcsd(workdir, cfg, env=env)
     try:
         connect(line)
-        return {"streams": streams_alone(line), "param list": param_list(line), "param.pck": param_pck(line)}
+        return {"streams": streams_alone(line), "param list": param_list(line), "param.pck": param_pck(line),
+                "mission": mission(line)}
     finally:
         print(f"gcsd {server.stop()}", file=sys.stderr)
         line.close()
 
 
 def table(res: dict) -> str:
-    s, p, f = res["streams"], res["param list"], res["param.pck"]
+    s, p, f, w = res["streams"], res["param list"], res["param.pck"], res["mission"]
     late = {True: "", False: "unfinished after "}
     rows = [
         "| step | time | streams kept | HEARTBEAT |",
@@ -230,6 +296,9 @@ def table(res: dict) -> str:
         (f"| FTP @PARAM/param.pck, {f['size']} B ({f['params']} parameters), open answered after "
          f"{f['opened_s']:.1f} s | {late[f['done']]}{f['seconds']:.1f} s | {f['streams_bps']:.0f} B/s | "
          f"{f['heartbeat_bps']:.0f} B/s |"),
+        (f"| mission of {w['items']} waypoints: upload (ACK {w['up_ack']}) | {w['up_s']:.1f} s | | |"),
+        (f"| mission: download, {w['down_items']} items | {w['down_s']:.1f} s | {w['streams_bps']:.0f} B/s | "
+         f"{w['heartbeat_bps']:.0f} B/s |"),
     ]
     return "\n".join(rows)
 
@@ -249,7 +318,8 @@ def main(argv: list[str]) -> int:
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
     print(table(res))
-    return 0 if res["param list"]["done"] and res["param.pck"]["done"] else 1
+    ok = res["mission"]["down_items"] == res["mission"]["items"] and res["mission"]["up_ack"] == 0
+    return 0 if res["param list"]["done"] and res["param.pck"]["done"] and ok else 1
 
 
 if __name__ == "__main__":
