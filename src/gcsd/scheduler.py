@@ -41,7 +41,8 @@ streams hold back for that pass (as ArduPilot reserves room for PARAM_VALUE). Wi
 the services may use the whole budget, and with no service waiting the streams do: on a link
 the streams alone fill (the copter's defaults want ~2 000 B/s, a 9 600-baud link has 960) a
 parameter list, FTP, mission items and STATUSTEXT still get through, while the streams (slowed
-×4 during a list, a mission upload or FTP, as in ArduPilot) keep about a third.
+×4 during a list, a mission upload or FTP, as in ArduPilot) keep over a quarter of it
+(bench/slow_link.py).
 ArduPilot orders it alike: the NEXT_PARAM special slot (queued parameter replies, then ~30 % of
 the bandwidth for a list) ahead of the pushed messages and the buckets, FTP on its own thread
 pacing bursts to a third of the link. A link without a budget has no share: the services simply
