@@ -228,6 +228,15 @@ def rate_hz(records: list[Received]) -> float:
     return (len(records) - 1) / (records[-1].t - records[0].t)
 
 
+def stamped_rate_hz(records: list[Received]) -> float:
+    """Measured rate on the sender's clock: intervals between the first and the last `time_boot_ms`
+    stamp. A reader descheduled for a moment reads a few frames late and at once, which moves
+    arrival times (rate_hz) but not the stamps the daemon wrote when it sent them."""
+    if len(records) < 2:
+        return 0.0
+    return (len(records) - 1) / ((records[-1].msg.time_boot_ms - records[0].msg.time_boot_ms) / 1000)
+
+
 def measure_rates(clients: dict[str, Client], kinds: dict[str, tuple[str, ...]], seconds: float,
                   src: tuple[int, int] = VEHICLE) -> dict[tuple[str, str], float]:
     """Rates (Hz) of each message type in kinds[name] as received by clients[name] over `seconds`."""

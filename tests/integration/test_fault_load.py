@@ -33,7 +33,7 @@ from pathlib import Path
 import pytest
 from pymavlink.generator.mavcrc import x25crc
 
-from .helpers import Client, M, await_ready, download_params, notify_socket, pump, rate_hz
+from .helpers import Client, M, await_ready, download_params, notify_socket, pump, stamped_rate_hz
 
 pytestmark = pytest.mark.fault
 
@@ -237,7 +237,8 @@ def test_noise_and_random_frames_on_every_channel_leave_the_daemon_serving(tmp_p
             mark = gcs.mark()
             gcs.heartbeat()
             pump([gcs], 2.0)
-            rates.append(rate_hz([r for r in gcs.since(mark, "ATTITUDE") if r.src == VEHICLE]))
+            # on the daemon's clock (ATTITUDE's stamps): the reader's own scheduling is not measured
+            rates.append(stamped_rate_hz([r for r in gcs.since(mark, "ATTITUDE") if r.src == VEHICLE]))
             rss.append(d.rss_kb())
             assert d.proc.poll() is None, "gcsd died under noise"
         stop.set()
@@ -318,11 +319,12 @@ def test_serial_device_unplugged_and_back_reconnects(tmp_path):
     parser = M.MAVLink(None)
     parser.robust_parsing = True
 
-    def heartbeats_from(fd: int, seconds: float) -> int:
+    def heartbeats_from(fd: int, seconds: float, wanted: int = 2) -> int:
+        """HEARTBEATs read from fd until `wanted` have come or `seconds` have passed."""
         n = 0
         end = time.monotonic() + seconds
         os.set_blocking(fd, False)
-        while time.monotonic() < end:
+        while time.monotonic() < end and n < wanted:
             try:
                 data = os.read(fd, 4096)
             except (BlockingIOError, OSError):
@@ -333,7 +335,7 @@ def test_serial_device_unplugged_and_back_reconnects(tmp_path):
 
     try:
         os.write(master, M.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3).pack(M.MAVLink(None, 255, 190)))
-        assert heartbeats_from(master, 2.5) >= 2
+        assert heartbeats_from(master, 9.0) >= 2, "the serial channel is served"  # 1 Hz, however loaded
         os.close(master)  # unplugged
         os.close(slave)
         time.sleep(1.5)
