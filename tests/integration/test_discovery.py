@@ -95,7 +95,8 @@ def test_a_broadcast_channel_is_found_by_an_auto_connect_listener_and_then_talks
         version = qgc.wait_for(from_vehicle("AUTOPILOT_VERSION"), since=mark)
         assert version is not None, "the vehicle did not answer the ground station"
         assert version[3] == "127.0.0.1" and version[2] == vehicle  # unicast, from the same socket
-        qgc.read(1.5)
+        qgc.read(1.5)  # the window for a broadcast after the lock, and on until a HEARTBEAT (1 Hz) came in it
+        qgc.wait_for(lambda r: r[0] > version[0] and from_vehicle("HEARTBEAT")(r), since=mark)
         after = [r for r in qgc.received[mark:] if r[0] > version[0] and from_vehicle("HEARTBEAT")(r)]
         assert after and all(r[3] == "127.0.0.1" for r in after)
     finally:

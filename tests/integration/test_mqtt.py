@@ -38,7 +38,7 @@ from gcsd.mission import MissionItem
 from gcsd.mqtt import MqttLink
 
 from .bridge import NullModem
-from .helpers import Client, M, pump, udp_channel, udp_url, wait_for
+from .helpers import Client, M, pump, pump_until, udp_channel, udp_url, wait_for
 from .mission_client import MissionClient
 from .mosquitto import Mosquitto, mosquitto_binary, password_file, tls_files
 
@@ -327,9 +327,11 @@ def test_signing_end_to_end_through_the_broker(broker, daemon, client, tap, tmp_
     mark = unsigned.mark()
     unsigned.send(M.MAVLink_param_request_read_message(3, 1, b"SYSID_THISMAV", -1))
     unsigned.heartbeat()
-    pump([unsigned, gcs], 1.5)
+    # the refusal (ground side, broker, vehicle side) is awaited, in a window of at least 1.5 s in
+    # which no answer reaches the unsigned station
+    assert pump_until([unsigned, gcs], lambda: vehicle.stats("fleet").get("signature_rejects_unsigned", 0) > rejects,
+                      at_least_s=1.5), "the unsigned request never reached the vehicle side"
     assert not [r for r in unsigned.since(mark, "PARAM_VALUE") if r.src == (3, 1)]
-    assert vehicle.stats("fleet").get("signature_rejects_unsigned", 0) > rejects
     assert param_value(gcs, (3, 1), b"SYSID_THISMAV") == 3.0, "the signed station is still answered"
 
 
@@ -420,9 +422,14 @@ def test_garbage_oversized_and_spoofed_messages_are_counted_and_dropped(broker, 
     attacker.publish(f"{topic}/up/3/1", spoofed * 200)  # oversized
     attacker.publish(f"{topic}/up/3/1", spoofed)
     assert heard_all(gcs, {(3, 1)}).get((3, 1)), "the ground side still routes the fleet"
-    pump([gcs], 0.5)
+    # the vehicle's HEARTBEAT comes through its own connection to the broker, so it does not prove
+    # the attacker's four messages were read: their counts are awaited (at least 0.5 s of window)
+    def counted() -> bool:
+        fleet = ground.stats("fleet")
+        return fleet["parse_errors"] >= before + 3 and fleet["spoofed_dropped"] >= 1
+
+    assert pump_until([gcs], counted, at_least_s=0.5), ground.stats("fleet")
     assert 9 not in {r.src[0] for r in gcs.since(mark, "HEARTBEAT")}, "the spoofed source was not routed"
-    assert ground.stats("fleet")["parse_errors"] >= before + 3
     assert ground.stats("fleet")["spoofed_dropped"] == 1
 
 
