@@ -270,7 +270,7 @@ class VehicleNode:
             if not scheduler.run_urgent(now, send):
                 return now + max(out.budget_wait_s(), 0.001)
             deadline = self._services_turn(channel, now, share)
-        if share is not None and share.waiting:  # owed traffic waits for a full frame: the streams hold back
+        if share is not None and share.holds_streams(now):  # owed traffic waits for a whole frame
             streams = now + max(out.budget_wait_s(), 0.001)
         elif scheduler.run_streams(now, send):
             streams = scheduler.next_deadline(now)

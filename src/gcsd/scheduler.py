@@ -60,6 +60,7 @@ NUM_BUCKETS = 10
 MAX_INTERVAL_MS = 60_000
 MIN_INTERVAL_MS = 1  # backstop; the real cap (SCHED_LOOP_RATE) is applied where requests are accepted
 SERVICE_SHARE = 2 / 3  # of a link's byte budget, guaranteed to the services while the streams are due
+HOLD_MAX_S = 1.0  # the streams hold back for a waiting service at most this long without it sending
 
 
 @dataclass(slots=True)
@@ -240,9 +241,11 @@ class ServiceShare:
     but the link has not, the service is `waiting` and the streams hold back for this pass, so
     owed traffic of a whole frame is not nibbled away by 40-byte stream messages (an optional
     copy, skipped when there is no room, asks `Outbox.fits_now` and waits for nothing); when
-    the share is spent, the streams have the link. Under contention the services get
-    SERVICE_SHARE of the budget and the streams the rest; with no stream due the services may
-    use all of it, and with no service waiting the streams do.
+    the share is spent, the streams have the link. A hold lasts HOLD_MAX_S at most without a
+    service sending (`holds_streams`): forwarded frames, which the streams do not control, may
+    keep the link short of a whole frame, and then the streams go on. Under contention the
+    services get SERVICE_SHARE of the budget and the streams the rest; with no stream due the
+    services may use all of it, and with no service waiting the streams do.
     """
 
     def __init__(self, rate_bps: float, link_capacity: float, now: float) -> None:
@@ -250,6 +253,7 @@ class ServiceShare:
         self.bucket.capacity = self.bucket.tokens = 2.0 * link_capacity
         self.enforced = False
         self.waiting = False
+        self._held_since_s: float | None = None  # streams held back, and no service sent, since
 
     def begin(self, enforced: bool) -> None:
         """A new services' turn: limited by the share when `enforced` (the streams are due)."""
@@ -274,6 +278,18 @@ class ServiceShare:
 
     def charge(self, nbytes: int, now: float) -> None:
         self.bucket.charge(nbytes, now)
+        self._held_since_s = None  # a service sent: the hold did its work
+
+    def holds_streams(self, now: float) -> bool:
+        """Do the streams hold back in this pass? While a service waits within its share, for at
+        most HOLD_MAX_S on end without one sending (something the streams do not control, such
+        as forwarded frames, may be keeping the link's budget short of the frame it waits for)."""
+        if not self.waiting:
+            self._held_since_s = None
+            return False
+        if self._held_since_s is None:
+            self._held_since_s = now
+        return now - self._held_since_s < HOLD_MAX_S
 
 
 def _advance(last_s: float, interval_s: float, now: float) -> float:

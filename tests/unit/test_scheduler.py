@@ -244,3 +244,17 @@ def test_an_optional_copy_that_finds_no_room_waits_for_nothing():
     share = ServiceShare(RATE, DEPTH, 0.0)
     share.begin(enforced=True)
     assert not share.admits(280, 100.0, DEPTH, 0.0, waits=False) and not share.waiting
+
+
+def test_the_streams_hold_back_for_a_waiting_service_at_most_a_second_without_it_sending():
+    share = ServiceShare(RATE, DEPTH, 0.0)
+    for now in (0.0, 0.5, 0.99):
+        share.begin(enforced=True)
+        assert not share.admits(280, 100.0, DEPTH, now) and share.holds_streams(now)
+    share.begin(enforced=True)
+    assert not share.admits(280, 100.0, DEPTH, 1.0) and not share.holds_streams(1.0), "forwarded frames keep the link"
+    share.charge(280, 1.1)  # the service got its frame: a new wait may hold them again
+    share.begin(enforced=True)
+    assert not share.admits(37, 10.0, DEPTH, 1.2) and share.holds_streams(1.2)
+    share.begin(enforced=True)
+    assert share.admits(37, 280.0, DEPTH, 1.3) and not share.holds_streams(1.3), "nobody waits: nothing held"

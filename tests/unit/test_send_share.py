@@ -161,3 +161,23 @@ def test_a_mission_goes_up_and_comes_back_over_a_full_link(radio):
     streams = [m for m in radio.received[mark:] if m not in owed and m.get_type() != "HEARTBEAT"]
     assert _bytes(streams) >= 0.7 * (1 - SERVICE_SHARE) * BUDGET_BPS * elapsed, "the streams' share"
     assert _bytes(radio.received[mark:]) <= BUDGET_BPS * elapsed + 280, "within the budget"
+
+
+def test_forwarded_frames_that_keep_the_link_short_of_a_frame_do_not_stop_the_streams(radio):
+    """An FTP reply waits for a whole frame that never comes: frames forwarded from another link
+    (12 kB/s, dropped and counted beyond the budget) take the budget as it refills. The streams
+    hold back for the reply at most HOLD_MAX_S (1 s), then go on with what the budget leaves."""
+    ftp = FtpClient(radio)
+    ftp.request(Op.LIST_DIRECTORY, b"/")
+    forwarded = bytes(M.MAVLink_statustext_message(M.MAV_SEVERITY_INFO, b"x" * 50).pack(
+        M.MAVLink(None, srcSystem=7, srcComponent=1)))  # from another vehicle, for everyone
+    mark = radio.mark()
+    for _ in range(500):  # 5 s
+        radio.t += 0.01
+        radio.channel.tick(radio.t, radio.clock.wall())
+        radio.channel.write(forwarded)
+        radio.node.send_pass(radio.channel, radio.t)
+    late = [m for m in radio.received[mark:] if m.get_srcSystem() == 1 and m.get_type() not in (
+        "HEARTBEAT", "FILE_TRANSFER_PROTOCOL")]
+    assert late and late[0].get_type() != "STATUSTEXT", "the streams went on"
+    assert radio.channel.snapshot()["drops"] > 0, "the forwarded frames did fill the link"
