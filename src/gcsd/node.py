@@ -239,7 +239,7 @@ class VehicleNode:
         nothing else but the streams); HEARTBEAT and pushed messages; STATUSTEXT, then each
         service's `pending`; the replies, the text and the services all within their ServiceShare
         of the byte budget while streams are due; then the stream buckets, unless one of them is
-        waiting for the budget to refill within its share."""
+        waiting for the budget to refill within its share (for HOLD_MAX_S at most)."""
         link = self.links[channel.index]
         scheduler = link.scheduler
         sysid, compid = self.sysid, self.compid
