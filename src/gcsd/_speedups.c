@@ -184,7 +184,10 @@ add_to(PyObject *obj, PyObject *name, Py_ssize_t delta)
 static int
 track_seq(PyObject *last_seq, int sysid, int compid, int seq, Py_ssize_t *gaps)
 {
-    PyObject *key = Py_BuildValue("(ii)", sysid, compid);
+    PyObject *a = PyLong_FromLong(sysid), *b = PyLong_FromLong(compid); /* small ints: cached */
+    PyObject *key = (a && b) ? PyTuple_Pack(2, a, b) : NULL;
+    Py_XDECREF(a);
+    Py_XDECREF(b);
     if (key == NULL)
         return -1;
     PyObject *entry = PyDict_GetItemWithError(last_seq, key); /* borrowed */
