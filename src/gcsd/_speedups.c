@@ -604,8 +604,8 @@ rf_init(RecentFramesObject *self, PyObject *args, PyObject *kwds)
     Py_ssize_t max_frames = 65536;
     if (!PyArg_ParseTupleAndKeywords(args, kwds, "d|n", kwlist, &window_s, &max_frames))
         return -1;
-    if (!(window_s > 0) || max_frames < 1) {
-        PyErr_SetString(PyExc_ValueError, "window_s must be > 0 and max_frames >= 1");
+    if (!(window_s > 0 && window_s < Py_HUGE_VAL) || max_frames < 1) { /* NaN fails too */
+        PyErr_SetString(PyExc_ValueError, "window_s must be > 0 and finite, and max_frames >= 1");
         return -1;
     }
     if (self->at != NULL) {
@@ -697,8 +697,12 @@ rf_remember(RecentFramesObject *self, PyObject *raw, double now)
 }
 
 static int
-rf_args(PyObject *const *args, Py_ssize_t nargs, double *now)
+rf_args(RecentFramesObject *self, PyObject *const *args, Py_ssize_t nargs, double *now)
 {
+    if (self->at == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "RecentFrames.__init__ was not called");
+        return -1;
+    }
     if (nargs != 2) {
         PyErr_SetString(PyExc_TypeError, "expected (raw, now)");
         return -1;
@@ -711,7 +715,7 @@ static PyObject *
 rf_seen_m(RecentFramesObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     double now;
-    if (rf_args(args, nargs, &now) < 0)
+    if (rf_args(self, args, nargs, &now) < 0)
         return NULL;
     int r = rf_seen(self, args[0], now);
     return r < 0 ? NULL : PyBool_FromLong(r);
@@ -721,7 +725,7 @@ static PyObject *
 rf_remember_m(RecentFramesObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     double now;
-    if (rf_args(args, nargs, &now) < 0 || rf_remember(self, args[0], now) < 0)
+    if (rf_args(self, args, nargs, &now) < 0 || rf_remember(self, args[0], now) < 0)
         return NULL;
     Py_RETURN_NONE;
 }
@@ -730,7 +734,7 @@ static PyObject *
 rf_check_m(RecentFramesObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     double now;
-    if (rf_args(args, nargs, &now) < 0)
+    if (rf_args(self, args, nargs, &now) < 0)
         return NULL;
     int r = rf_seen(self, args[0], now);
     if (r < 0)

@@ -53,8 +53,8 @@ class RecentFramesPython:
     __slots__ = ("_at", "_order", "_sweep_at", "evicted", "max_frames", "window_s")
 
     def __init__(self, window_s: float, max_frames: int = MAX_FRAMES) -> None:
-        if window_s <= 0 or max_frames < 1:
-            raise ValueError("window_s must be > 0 and max_frames >= 1")
+        if not 0 < window_s < float("inf") or max_frames < 1:  # NaN fails the comparison too
+            raise ValueError("window_s must be > 0 and finite, and max_frames >= 1")
         self.window_s = float(window_s)
         self.max_frames = max_frames
         self._at: dict[bytes, float] = {}

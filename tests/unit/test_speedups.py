@@ -298,3 +298,16 @@ def test_the_compiled_recent_frames_answer_as_the_python_ones(ops, window_s, max
 
 def test_the_compiled_recent_frames_are_used_when_built():
     assert dedup.RecentFrames is (speedups.compiled.RecentFrames if speedups.compiled else dedup.RecentFramesPython)
+
+
+@needs_c
+def test_a_recent_frames_never_initialised_refuses_instead_of_crashing():
+    bare = speedups.compiled.RecentFrames.__new__(speedups.compiled.RecentFrames)
+    with pytest.raises(RuntimeError):
+        bare.seen(b"x", 1.0)
+    assert len(bare) == 0
+    for bad in (float("nan"), float("inf"), 0.0, -1.0):  # refused by both, as at every edge
+        with pytest.raises(ValueError):
+            speedups.compiled.RecentFrames(bad)
+        with pytest.raises(ValueError):
+            dedup.RecentFramesPython(bad)
