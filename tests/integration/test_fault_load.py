@@ -336,12 +336,16 @@ def test_serial_device_unplugged_and_back_reconnects(tmp_path):
     try:
         os.write(master, M.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3).pack(M.MAVLink(None, 255, 190)))
         assert heartbeats_from(master, 9.0) >= 2, "the serial channel is served"  # 1 Hz, however loaded
-        os.close(master)  # unplugged
+        # unplugged: the by-id link goes with the device, as udev removes it. Left pointing at the
+        # freed /dev/pts/N, it let the daemon's reopening take the next PTY given that number, another
+        # test's (a parallel worker's): it flushed and read that test's input (test_serial_control's
+        # device answer vanished, 1 run in 3 of four files at once beside CPU hogs)
+        link.unlink()
+        os.close(master)
         os.close(slave)
         time.sleep(1.5)
         assert d.proc.poll() is None
         master, slave = os.openpty()  # plugged back in, maybe under another name
-        link.unlink()
         link.symlink_to(os.ttyname(slave))
         os.write(master, M.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3).pack(M.MAVLink(None, 255, 190)))
         assert heartbeats_from(master, 9.0) >= 2, "the serial channel came back"

@@ -40,9 +40,7 @@ def _request(device: int, data: bytes, flags: int = FLAGS, timeout_ms: int = 300
 def test_serial_control_writes_to_the_device_and_replies_with_what_it_answers(gps1):
     _, gcs, master = gps1
     mark = gcs.mark()
-    # the device answers at once; the request's window (2 s) leaves room for this test's reader to be
-    # descheduled between the daemon's write and its answer (with 500 ms a loaded machine could miss it)
-    gcs.send(_request(M.SERIAL_CONTROL_DEV_GPS1, b"$PMTK605*31\r\n", timeout_ms=2000))
+    gcs.send(_request(M.SERIAL_CONTROL_DEV_GPS1, b"$PMTK605*31\r\n", timeout_ms=500))
     got = bytearray()
     deadline = time.monotonic() + 5.0  # the request's bytes are awaited, not expected within 0.4 s
     while not got.endswith(b"\r\n") and time.monotonic() < deadline:
@@ -53,7 +51,7 @@ def test_serial_control_writes_to_the_device_and_replies_with_what_it_answers(gp
             pass
     assert bytes(got) == b"$PMTK605*31\r\n"
     os.write(master, b"$PMTK705,AXN_5.1*2B\r\n")
-    reply = wait_for(gcs, lambda r: r.type == "SERIAL_CONTROL", 5.0, mark)
+    reply = wait_for(gcs, lambda r: r.type == "SERIAL_CONTROL", 3.0, mark)
     assert reply is not None and reply.src == (1, 1)
     assert reply.msg.flags == M.SERIAL_CONTROL_FLAG_REPLY and reply.msg.device == M.SERIAL_CONTROL_DEV_GPS1
     assert bytes(reply.msg.data[:reply.msg.count]) == b"$PMTK705,AXN_5.1*2B\r\n"
