@@ -1,6 +1,7 @@
 """Where a routed frame's time goes, per component, for one or more revisions of gcsd: bench/route_cost.py
 (Channel.receive -> routing -> the peer's writer, in process, no sockets) sampled by py-spy, its
-samples split by the component they fall in, and scaled to route_cost's own microseconds per frame.
+samples split by the component they fall in, and scaled to route_cost's own microseconds per frame
+(measured in a run of its own: the sampler slows the process it samples).
 
 Run: ``python -m bench.route_split [REV ...]`` (default: HEAD; about 40 s a revision). Needs py-spy
 (``pip install py-spy``). Each REV is exported with `git archive` (gcsd._speedups built in the
@@ -50,9 +51,11 @@ def split(src: Path, workdir: Path) -> tuple[float, dict[str, float]]:
     env = {"PYTHONPATH": str(src), "PATH": "/usr/bin:/bin"}
     raw = workdir / "samples.txt"
     spy = shutil.which("py-spy") or str(Path(sys.executable).parent / "py-spy")
-    out = subprocess.run([spy, "record", "-r", "1000", "--native", "-f", "raw", "-o", str(raw), "--", sys.executable, "-m",
-                          "bench.route_cost"], cwd=REPO, env=env, capture_output=True, text=True, check=True)
-    per_frame = float(re.search(r"20 routes:\s+([\d.]+) us per routed frame", out.stdout).group(1))
+    plain = subprocess.run([sys.executable, "-m", "bench.route_cost"], cwd=REPO, env=env, capture_output=True,
+                           text=True, check=True)  # the total, without the sampler's own cost
+    per_frame = float(re.search(r"20 routes:\s+([\d.]+) us per routed frame", plain.stdout).group(1))
+    subprocess.run([spy, "record", "-r", "1000", "--native", "-f", "raw", "-o", str(raw), "--", sys.executable, "-m",
+                    "bench.route_cost"], cwd=REPO, env=env, capture_output=True, text=True, check=True)
     counts: collections.Counter[str] = collections.Counter()
     for line in raw.read_text().splitlines():
         stack, _, n = line.rpartition(" ")
