@@ -222,12 +222,16 @@ def test_an_icmp_error_is_raised_once_and_the_data_behind_it_still_comes(recv_ba
         back.close()
 
 
-def test_an_ipv6_socket_is_read_by_the_python_receiver(udp):
+@pytest.fixture
+def udp6(udp):
     try:
-        s6 = udp(socket.AF_INET6, "::1")
+        return udp(socket.AF_INET6, "::1")
     except OSError:
         pytest.skip("no IPv6 loopback")
-    assert speedups.receiver(s6) is speedups.recv_batch_python
+
+
+def test_an_ipv6_socket_is_read_by_the_python_receiver(udp, udp6):
+    assert speedups.receiver(udp6) is speedups.recv_batch_python
     expected = speedups.compiled.recv_batch if speedups.compiled else speedups.recv_batch_python
     assert speedups.receiver(udp()) is expected
 
@@ -268,12 +272,10 @@ def test_a_datagram_the_kernel_refuses_is_dropped_and_the_rest_still_go(send_bat
     assert _received(rx, 2) == [b"first", b"last"]
 
 
-def test_an_ipv6_socket_is_written_by_the_python_sender(udp):
-    try:
-        s6 = udp(socket.AF_INET6, "::1")
-    except OSError:
-        pytest.skip("no IPv6 loopback")
-    assert speedups.sender(s6) is speedups.send_batch_python
+def test_an_ipv6_socket_is_written_by_the_python_sender(udp, udp6):
+    expected = speedups.compiled.send_batch if speedups.compiled else speedups.send_batch_python
+    assert speedups.sender(udp6) is speedups.send_batch_python
+    assert speedups.sender(udp()) is expected
 
 
 # --- RecentFrames (dedup.py) -------------------------------------------------------------------
