@@ -88,8 +88,8 @@ def measure_routes(runner) -> dict:
 
 
 def table(res: dict) -> str:
-    lines = [f"Route table size (bench/routes.py): CPU per routed packet at {res['rate']} pkt/s, "
-             f"{SIZES[0]} against {SIZES[1]} learned routes (medians of the rounds)"]
+    lines = [(f"Route table size (bench/routes.py): CPU per routed packet at {res['rate']} pkt/s, "
+              f"{SIZES[0]} against {SIZES[1]} learned routes (medians of the rounds)")]
     for router, r in res.items():
         if not isinstance(r, dict) or "ratio" not in r:
             continue
