@@ -379,5 +379,6 @@ class GCS:
     def counters(self) -> dict[str, int]:
         return status.counters(self)
 
+
 def _peer_name(key: object) -> str:
     return f"{key[0]}:{key[1]}" if isinstance(key, tuple) and len(key) == 2 else str(key)

@@ -84,6 +84,8 @@ def _decision(process: bool, out: tuple[int, ...] = ()) -> Decision:
             _DECISIONS.clear()
         d = _DECISIONS[key] = Decision(process, out)
     return d
+
+
 _NONE: list[Route] = []
 
 
