@@ -83,9 +83,9 @@ def measure_gates(runner) -> dict:
 def gate_cost_ns() -> float:
     """ns per frame of InGate.allow + OutGate.allow (the gated configuration, a frame that passes)."""
     from bench.frames import FrameFactory  # the routed frame, as the sender sends it
-    from gcsd.codec import FrameParser
     from gcsd.config import parse_config
-    from gcsd.filters import gates
+    from gcsd.routing.filters import gates
+    from gcsd.wire.codec import FrameParser
 
     cfg = parse_config(f"channels:\n  - {{name: a, type: udp-server, address: '127.0.0.1:0'{GATE_A}}}\n"
                        f"  - {{name: b, type: udp-server, address: '127.0.0.1:0'{GATE_B}}}\n")

@@ -1,4 +1,4 @@
-"""What loop protection (gcsd.dedup.RecentFrames) costs per routed frame.
+"""What loop protection (gcsd.routing.dedup.RecentFrames) costs per routed frame.
 
 Run: ``python -m bench.dedup_cost`` (a few seconds, one core).
 
@@ -19,7 +19,7 @@ import platform
 import sys
 import time
 
-from gcsd.dedup import LOOP_WINDOW_S, RecentFrames
+from gcsd.routing.dedup import LOOP_WINDOW_S, RecentFrames
 
 N = 200_000
 

@@ -6,7 +6,7 @@ of the datagrams in each direction (tests/integration/mission_client.LossyProxy)
 clients, each against two daemons:
 
 - ``adaptive``: gcsd with its default configuration (only the port is set): re-requests timed by
-  the uploader's measured round trip (gcsd.rtt; ceiling mission.retry_ms = 1000).
+  the uploader's measured round trip (gcsd.vehicle.mission.rtt; ceiling mission.retry_ms = 1000).
 - ``fixed 1 s``: ArduPilot's timer. ArduPilot SITL is not available here, so the same gcsd is
   started with its re-request timeout replaced by a constant: ``RttEstimator.timeout_s`` returns
   1.0 s plus the link's backlog (ArduPilot: 1000 ms + stream_slowdown_ms), whatever was measured
@@ -48,10 +48,10 @@ from pathlib import Path
 if __package__ in (None, ""):  # run as a script: python bench/lossy.py
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as M
+from tests.integration.mission_client import LossyProxy
 
-from bench.routers import Launched, _launch, free_udp_port, gcsd_config, gcsd_env, udp_port_bound  # noqa: E402
-from tests.integration.mission_client import LossyProxy  # noqa: E402  (the tests' seeded proxy)
+from bench.routers import Launched, _launch, free_udp_port, gcsd_config, gcsd_env, udp_port_bound
 
 ITEMS = 30
 LOSSES = (0.0, 0.05, 0.10, 0.20, 0.30)
@@ -63,9 +63,9 @@ CLIENTS = ("MAVSDK", "MAVProxy", "pymavlink")
 MODES = ("adaptive", "fixed 1 s")
 HOME = (-353632620, 1491652370, 584.0)
 FIXED_PATCH = (
-    "import sys, gcsd.rtt as r; "
+    "import sys, gcsd.vehicle.mission.rtt as r; "
     "r.RttEstimator.timeout_s = lambda self, queued_s=0.0: 1.0 + max(0.0, queued_s); "  # ArduPilot's fixed 1 s
-    "from gcsd.cli import main; sys.exit(main(sys.argv[1:]))"
+    "from gcsd.daemon.cli import main; sys.exit(main(sys.argv[1:]))"
 )
 
 

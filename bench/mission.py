@@ -40,8 +40,8 @@ from pathlib import Path
 if __package__ in (None, ""):  # run as a script: python bench/mission.py
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from bench import mavsdk_peer, report  # noqa: E402
-from bench.routers import Launched, _launch, free_udp_port, gcsd_config, udp_port_bound  # noqa: E402
+from bench import mavsdk_peer, report
+from bench.routers import Launched, _launch, free_udp_port, gcsd_config, udp_port_bound
 
 TOTAL = 1000
 SPEC_TARGET_S = 1.5

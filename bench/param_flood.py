@@ -48,9 +48,9 @@ from pathlib import Path
 if __package__ in (None, ""):  # run as a script: python bench/param_flood.py
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from bench.routers import (  # noqa: E402
+from bench.routers import (
     _launch,
     cpu_seconds,
     free_udp_port,

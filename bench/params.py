@@ -7,7 +7,7 @@ Servers (each its own process, each answering as sysid 1 / compid 1 on a UDP por
 - ``gcsd (built-in)``: ``python -m gcsd run`` with one ``udp-server`` channel and default stream
   rates, i.e. the parameters a user gets (the shared set plus the ten SR0_* of the one channel).
 - ``gcsd (1 000)``: the same daemon started by this file (``serve-gcsd``) after wrapping
-  ``gcsd.node.vehicle_params`` so the vehicle's ParamStore gets filler definitions ``BENCH_0000``...
+  ``gcsd.vehicle.node.vehicle_params`` so the vehicle's ParamStore gets filler definitions ``BENCH_0000``...
   (INT8, INT16, INT32, REAL32 in turn) up to at least 1 000. The built-in copter set is
   ArduPilot 4.6's own (1 000 parameters with one channel: params/data/copter.tsv), so today the
   filler adds nothing and both gcsd rows serve the real ArduCopter list; the wrapper stays for a
@@ -58,12 +58,12 @@ from pathlib import Path
 if __package__ in (None, ""):  # run as a script: python bench/params.py
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from bench import mavsdk_peer, report  # noqa: E402
-from bench.frames import walk_frames  # noqa: E402
-from bench.peers import _big_buffers  # noqa: E402
-from bench.routers import (  # noqa: E402
+from bench import mavsdk_peer, report
+from bench.frames import walk_frames
+from bench.peers import _big_buffers
+from bench.routers import (
     Launched,
     _launch,
     free_udp_port,
@@ -94,7 +94,7 @@ def log(msg: str) -> None:
 
 def filler_defs(n: int, start: int = 0):
     """n bench-only definitions, BENCH_0000..., the four types in turn, each with its range."""
-    from gcsd.params import INT8, INT16, INT32, REAL32, ParamDef
+    from gcsd.vehicle.params import INT8, INT16, INT32, REAL32, ParamDef
 
     kinds = [(INT8, 1, 0, 100), (INT16, 1500, 800, 2200), (INT32, 100_000, 0, 1_000_000),
              (REAL32, 0.25, -1e6, 1e6)]
@@ -110,7 +110,7 @@ def bench_defs(total: int = TOTAL):
     """What ``serve-gcsd`` serves with gcsd's default configuration: the copter's set with one
     channel at default stream rates, then filler up to ``total``."""
     from gcsd.config import DEFAULT_STREAM_RATES_HZ
-    from gcsd.vehicles import VEHICLE_TYPES, vehicle_params
+    from gcsd.vehicle.types import VEHICLE_TYPES, vehicle_params
 
     defs = vehicle_params(VEHICLE_TYPES["copter"], 1, 255, False, [dict(DEFAULT_STREAM_RATES_HZ)], 1.0)
     return defs + filler_defs(max(0, total - len(defs)))
@@ -118,23 +118,24 @@ def bench_defs(total: int = TOTAL):
 
 def serve_gcsd(cfg: str, total: int) -> int:
     """gcsd's own CLI, with every vehicle's definitions padded to ``total`` (bench only)."""
-    import gcsd.node
-    from gcsd.cli import main
+    import gcsd.vehicle.node
+    from gcsd.daemon.cli import main
 
-    original = gcsd.node.vehicle_params
+    original = gcsd.vehicle.node.vehicle_params
 
     def padded(*args, **kwargs):
         defs = original(*args, **kwargs)
         return defs + filler_defs(max(0, total - len(defs)))
 
-    gcsd.node.vehicle_params = padded
+    gcsd.vehicle.node.vehicle_params = padded
     return main(["run", "-c", cfg])
 
 
 def serve_mavsdk(port: int, total: int) -> int:
     """MAVSDK's param_server as an autopilot on udpin://127.0.0.1:port, until SIGTERM."""
-    from gcsd.params import REAL32
     from mavsdk.plugins.param_server import ParamServer
+
+    from gcsd.vehicle.params import REAL32
 
     with mavsdk_peer.node(f"udpin://127.0.0.1:{port}", autopilot=True) as mavsdk:
         server = ParamServer(mavsdk.server_component())

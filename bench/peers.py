@@ -142,8 +142,7 @@ def _paced_send(sock, dest, frames, lo, rate, stamp, min_sleep_s, next_hb, beat)
         due = min(count, int((now - t0) * rate) + 1)
         if due > i:
             lag = now - (t0 + i * period)
-            if lag > max_lag_s:
-                max_lag_s = lag
+            max_lag_s = max(max_lag_s, lag)
             while i < due:
                 try:
                     if stamps is not None:
@@ -176,8 +175,22 @@ def _paced_send(sock, dest, frames, lo, rate, stamp, min_sleep_s, next_hb, beat)
 
 
 class _Trial:
-    __slots__ = ("lo", "span", "seen", "uniq", "dup", "reorder", "last", "stale", "other", "bad",
-                 "datagrams", "stamps", "first_ns", "last_ns")
+    __slots__ = (
+        "bad",
+        "datagrams",
+        "dup",
+        "first_ns",
+        "last",
+        "last_ns",
+        "lo",
+        "other",
+        "reorder",
+        "seen",
+        "span",
+        "stale",
+        "stamps",
+        "uniq",
+    )
 
     def __init__(self, lo: int = 0, span: int = 0, stamp: bool = False) -> None:
         self.lo, self.span = lo, span

@@ -63,7 +63,7 @@ def _heartbeat(sysid: int, compid: int, mav_type: int = M.MAV_TYPE_GCS) -> bytes
 def measure(routes: int, extra: dict | None = None) -> tuple[float, int]:
     import tempfile
 
-    from gcsd.gcs import GCS
+    from gcsd.daemon.daemon import GCS
 
     with tempfile.TemporaryDirectory() as tmp:
         gcs = GCS(_config(tmp, routes, extra))

@@ -4,11 +4,11 @@ samples split by the component they fall in, and scaled to route_cost's own micr
 (measured in a run of its own: the sampler slows the process it samples).
 
 Run: ``python -m bench.route_split [REV ...]`` (default: HEAD; about 40 s a revision). Needs py-spy
-(``pip install py-spy``). Each REV is exported with `git archive` (gcsd._speedups built in the
+(``pip install py-spy``). Each REV is exported with `git archive` (gcsd.wire._speedups built in the
 export when the revision has it, as ``pip install -e .`` would: routers.export_gcsd_rev).
 
 Components, by the innermost gcsd function of a sample (py-spy --native: the C functions of
-gcsd._speedups have frames of their own): parse (codec: FrameParser.feed and what it calls, C
+gcsd.wire._speedups have frames of their own): parse (codec: FrameParser.feed and what it calls, C
 included), loop protection and dedup (dedup.py), the HTTP API's tap (http/), the routing
 decision (router.py), the outbox and the peer's writer (outbox.py), and the rest of the receive
 path (channel.py Channel.receive, gcs.py GCS.on_frame: attribute reads, calls, the error boundary).

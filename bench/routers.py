@@ -151,7 +151,7 @@ def gcsd_env(src_dir: Path | None) -> dict | None:
 
 
 def export_gcsd_rev(repo: Path, rev: str, dest: Path) -> tuple[Path, str]:
-    """``git archive REV src`` into dest, with gcsd._speedups built in place when REV has setup.py
+    """``git archive REV src`` into dest, with gcsd.wire._speedups built in place when REV has setup.py
     and a compiler is there (as ``pip install -e .`` would); returns (the src directory to import
     from, a description: REV's short commit, the last commit at or before it that changed src/ if
     different, and whether the compiled packet path is in)."""
@@ -171,7 +171,7 @@ def export_gcsd_rev(repo: Path, rev: str, dest: Path) -> tuple[Path, str]:
         built = subprocess.run([sys.executable, "setup.py", "-q", "build_ext", "--inplace"], cwd=dest,
                                capture_output=True, check=False)
         compiled = built.returncode == 0 and any((dest / "src" / "gcsd").glob("_speedups*.so"))
-        what += ", gcsd._speedups compiled" if compiled else ", pure Python (gcsd._speedups not built)"
+        what += ", gcsd.wire._speedups compiled" if compiled else ", pure Python (gcsd.wire._speedups not built)"
     return dest / "src", what
 
 

@@ -36,23 +36,23 @@ from pathlib import Path as FsPath
 if __package__ in (None, ""):  # run as a script: python bench/run.py
     sys.path.insert(0, str(FsPath(__file__).resolve().parent.parent))
 
-from bench import companion as bench_companion  # noqa: E402
-from bench import routes as bench_routes  # noqa: E402
-from bench import fleet as bench_fleet  # noqa: E402
-from bench import http as bench_http  # noqa: E402
-from bench import ftp as bench_ftp  # noqa: E402
-from bench import logs as bench_logs  # noqa: E402
-from bench import lossy as bench_lossy  # noqa: E402
-from bench import measure  # noqa: E402
-from bench import mission as bench_mission  # noqa: E402
-from bench import param_flood as bench_param_flood  # noqa: E402
-from bench import signing as bench_signing  # noqa: E402
-from bench import swarm as bench_swarm  # noqa: E402
-from bench import params as bench_params  # noqa: E402
-from bench.measure import Path, SeqAllocator, log  # noqa: E402
-from bench.peers import start_receiver, start_sender  # noqa: E402
-from bench.report import routers_table  # noqa: E402
-from bench.routers import (  # noqa: E402
+from bench import companion as bench_companion
+from bench import fleet as bench_fleet
+from bench import ftp as bench_ftp
+from bench import http as bench_http
+from bench import logs as bench_logs
+from bench import lossy as bench_lossy
+from bench import measure
+from bench import mission as bench_mission
+from bench import param_flood as bench_param_flood
+from bench import params as bench_params
+from bench import routes as bench_routes
+from bench import signing as bench_signing
+from bench import swarm as bench_swarm
+from bench.measure import Path, SeqAllocator, log
+from bench.peers import start_receiver, start_sender
+from bench.report import routers_table
+from bench.routers import (
     export_gcsd_rev,
     free_udp_port,
     gcsd_available,
@@ -393,7 +393,7 @@ class Runner:
 
         veh = g.get("vehicle")
         starts = sorted(veh.start_to_heartbeat_s) if veh else []
-        only_gcsd = lambda v: {"gcsd": v}  # noqa: E731
+        only_gcsd = lambda v: {"gcsd": v}
         rows = [
             ("packets routed between two UDP channels, no loss (pkt/s)", each(thr), "hi",
              ">= 40000 and >= 1.5x mavlink-router", throughput_ok),

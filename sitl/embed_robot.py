@@ -23,8 +23,8 @@ import yaml
 
 from gcsd.config import parse_config
 from gcsd.embed import run
-from gcsd.sim import Kind, Landed, Limits, Setpoint, VehicleState
-from gcsd.sim.geo import ne_m, offset, wrap_180
+from gcsd.vehicle.sim import Kind, Landed, Limits, Setpoint, VehicleState
+from gcsd.vehicle.sim.geo import ne_m, offset, wrap_180
 
 
 class DiffDriveRobot:

@@ -19,7 +19,7 @@ import pytest
 import yaml
 
 from gcsd.config import parse_config
-from gcsd.gcs import GCS
+from gcsd.daemon.daemon import GCS
 
 START_TIMEOUT_S = 5.0
 
@@ -28,7 +28,7 @@ class RunningDaemon:
     def __init__(self, config, backend=None, producers=None) -> None:
         self.config = config
         self.backend = backend  # gcsd.embed: backend(index) in place of the simulation
-        self.producers = producers  # a telemetry table in place of gcsd.telemetry.producers()
+        self.producers = producers  # a telemetry table in place of gcsd.vehicle.telemetry.producers()
         self.gcs: GCS | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None

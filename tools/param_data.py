@@ -21,7 +21,7 @@ What it decides (docs/parameters.md says the same for users):
   (gcsd's physics steps per real second; SITL's 1200 is its own loop).
 - Defaults are the captured values (SITL's defaults files included: FRAME_CLASS, BATT_MONITOR,
   RC and compass settings of a simulated vehicle). gcsd replaces a few at run time from its
-  configuration (SYSID_*, SRn_*, SIM_SPEEDUP): gcsd.params.defs.
+  configuration (SYSID_*, SRn_*, SIM_SPEEDUP): gcsd.vehicle.params.defs.
 - Ranges: the metadata's Range; else the span of its Values (numeric keys); else none (the C
   type's range). A range is widened to include the default (SITL's defaults files set a few
   values outside the documented range; writing the default back must work).

@@ -2,7 +2,7 @@
 
 import sys
 
-from gcsd.cli import main
+from gcsd.daemon.cli import main
 
 if __name__ == "__main__":
     sys.exit(main())

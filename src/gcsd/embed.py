@@ -9,13 +9,13 @@ own *backend*: an object with one method,
 called SIM_RATE_HZ times a real second (25 by default) with `dt_s` the time since the last call
 (real seconds x SIM_SPEEDUP, cut into steps of at most 0.1 s). It must
 
-- act on `setpoint` (gcsd.sim.Setpoint), what the autopilot wants now: `kind` IDLE (stay on the
+- act on `setpoint` (gcsd.vehicle.sim.Setpoint), what the autopilot wants now: `kind` IDLE (stay on the
   ground), HOLD / GOTO (lat, lon, alt_m above mean sea level, speed_ms, yaw_deg), TAKEOFF (climb to
   alt_m), LAND (at lat/lon), VELOCITY (north, east, down m/s), MANUAL (sticks -1..1), POINT / SCAN
-  (an antenna tracker); `limits` (gcsd.sim.Limits) are the vehicle type's speeds and radii from its
+  (an antenna tracker); `limits` (gcsd.vehicle.sim.Limits) are the vehicle type's speeds and radii from its
   parameters;
-- write where the vehicle is into `state` (gcsd.sim.VehicleState): lat, lon, alt_amsl_m, roll_rad,
-  pitch_rad, yaw_rad, vn_ms/ve_ms/vd_ms, airspeed_ms, throttle_pct, landed (gcsd.sim.Landed),
+- write where the vehicle is into `state` (gcsd.vehicle.sim.VehicleState): lat, lon, alt_amsl_m, roll_rad,
+  pitch_rad, yaw_rad, vn_ms/ve_ms/vd_ms, airspeed_ms, throttle_pct, landed (gcsd.vehicle.sim.Landed),
   gps_fix_type/satellites/hdop, consumed_mah/current_a (and anything else it knows). Every
   telemetry message is built from this state. `state.armed` and `state.mode` belong to gcsd:
   read them; change `mode` only to report a mode change the vehicle made by itself.
@@ -41,10 +41,10 @@ import signal
 from collections.abc import Callable
 from typing import Protocol, runtime_checkable
 
-from . import statelock
-from .config import Config
-from .gcs import GCS
-from .sim import Limits, Setpoint, VehicleState
+from gcsd.config import Config
+from gcsd.daemon import statelock
+from gcsd.daemon.daemon import GCS
+from gcsd.vehicle.sim import Limits, Setpoint, VehicleState
 
 
 @runtime_checkable

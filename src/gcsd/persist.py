@@ -31,8 +31,8 @@ from typing import Protocol
 
 import structlog
 
-from .atomic import write_atomic
-from .boundary import ErrorCounts
+from gcsd.atomic import write_atomic
+from gcsd.boundary import ErrorCounts
 
 log = structlog.get_logger("gcsd.persist")
 

@@ -25,7 +25,7 @@ import time
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.mission.items import MissionItem, from_item_int
+from gcsd.vehicle.mission.items import MissionItem, from_item_int
 
 from .helpers import VEHICLE, Client
 

@@ -14,11 +14,11 @@ import subprocess
 import sys
 import time
 
-from gcsd.channel import Channel
-from gcsd.gcs import GCS
-from gcsd.services.params import ParamService
-from gcsd.services.rates import RatesService
-from gcsd.signing import SigningManager
+from gcsd.daemon.daemon import GCS
+from gcsd.links.channel import Channel
+from gcsd.vehicle.services.params import ParamService
+from gcsd.vehicle.services.rates import RatesService
+from gcsd.wire.signing import SigningManager
 
 from .helpers import VEHICLE, M, is_ack, tcp_channel, tcp_url, udp_channel, udp_url, wait_for
 from .test_mqtt import broker, tap, vehicle_side  # noqa: F401  (fixtures)
@@ -136,7 +136,7 @@ def test_a_raise_in_the_mqtt_callback_is_counted_and_the_link_lives_on(broker, d
 
 
 def test_a_raise_in_the_stats_task_is_counted_and_the_daemon_keeps_serving(daemon, client, monkeypatch):
-    from gcsd import gcs
+    from gcsd.daemon import daemon as gcs
 
     def broken(self, last):
         raise RuntimeError("deliberately broken stats pass")
@@ -152,7 +152,7 @@ def test_a_raise_in_the_stats_task_is_counted_and_the_daemon_keeps_serving(daemo
 
 def test_a_raise_in_the_signing_timestamp_task_is_counted_and_the_daemon_keeps_serving(daemon, client,
                                                                                       monkeypatch):
-    from gcsd import gcs
+    from gcsd.daemon import daemon as gcs
 
     def broken(self):
         raise RuntimeError("deliberately broken timestamp save")

@@ -11,9 +11,9 @@ import math
 
 import pytest
 
-from gcsd.camera.jpeg import read_position
-from gcsd.mission.items import MissionItem
-from gcsd.sim.geo import distance_m, offset
+from gcsd.payloads.camera.jpeg import read_position
+from gcsd.vehicle.mission.items import MissionItem
+from gcsd.vehicle.sim.geo import distance_m, offset
 
 from .helpers import M, wait_for
 from .mission_client import MissionClient

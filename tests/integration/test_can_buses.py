@@ -10,11 +10,11 @@ import dronecan
 import pytest
 from dronecan.app.node_monitor import NodeMonitor
 
-from gcsd.can.buses import CanBus, CanBusError
-from gcsd.can.forward import EXTENDED_FLAG, CanFrame
-from gcsd.can.nodes import SimNode, _VirtualDriver
-from gcsd.config_can import CanBusConfig
-from gcsd.sim.state import VehicleState
+from gcsd.config.can import CanBusConfig
+from gcsd.payloads.can.buses import CanBus, CanBusError
+from gcsd.payloads.can.forward import EXTENDED_FLAG, CanFrame
+from gcsd.payloads.can.nodes import SimNode, _VirtualDriver
+from gcsd.vehicle.sim.state import VehicleState
 
 _names = itertools.count()
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import yaml
 
-from gcsd import control
+from gcsd.api import control
 
 from .helpers import VEHICLE, Client, M, from_vehicle, udp_channel, udp_url, wait_for
 

@@ -26,8 +26,8 @@ import time
 import pytest
 import yaml
 
-from gcsd.mission import wpl
-from gcsd.params.parmfile import read_parm
+from gcsd.vehicle.mission import wpl
+from gcsd.vehicle.params.parmfile import read_parm
 
 from .helpers import Client, M, pump
 

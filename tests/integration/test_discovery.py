@@ -4,7 +4,7 @@ answer the first vehicle HEARTBEAT with its own, then talk to the vehicle).
 
 Everything stays on loopback: the channel broadcasts to 127.255.255.255:PORT, which Linux
 delivers to sockets bound to 0.0.0.0:PORT (as QGroundControl binds 14550) and not to sockets
-bound to 127.0.0.1 (see gcsd.discovery). The listener reads each datagram's destination
+bound to 127.0.0.1 (see gcsd.links.discovery). The listener reads each datagram's destination
 address (IP_PKTINFO), so the test can tell broadcast from unicast.
 """
 

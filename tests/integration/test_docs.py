@@ -41,7 +41,7 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd import cli
+from gcsd.daemon import cli
 
 REPO = Path(__file__).resolve().parents[2]
 MARKDOWN = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md")), *sorted((REPO / "sitl").rglob("*.md")),

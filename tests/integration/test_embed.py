@@ -14,8 +14,8 @@ from pathlib import Path
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.embed import VehicleBackend, serve
-from gcsd.sim import Kind
-from gcsd.sim.geo import distance_m, offset
+from gcsd.vehicle.sim import Kind
+from gcsd.vehicle.sim.geo import distance_m, offset
 
 from .helpers import VEHICLE, is_ack, udp_url, wait_for
 

@@ -99,7 +99,7 @@ class Daemon:
         return 0
 
     def status(self) -> dict:
-        from gcsd.control import query
+        from gcsd.api.control import query
 
         return query(self.state / "gcsd.sock")
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from gcsd.ftp.protocol import Op, Payload
+from gcsd.vehicle.ftp.protocol import Op, Payload
 
 from .helpers import VEHICLE, M, is_type, pump, rate_hz, udp_channel, udp_url, wait_for
 

@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from gcsd.gimbal.geometry import euler
+from gcsd.payloads.gimbal.geometry import euler
 
 from .helpers import M, is_ack, wait_for
 
@@ -143,7 +143,7 @@ def test_mnt1_parameters_are_there_and_act(gimbal):
 
 def test_roi_location_keeps_the_gimbal_on_target_while_the_vehicle_flies(gimbal):
     gcs = gimbal
-    from gcsd.sim.geo import offset
+    from gcsd.vehicle.sim.geo import offset
     assert command(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL, DEVICE_STATUS, 100_000) == M.MAV_RESULT_ACCEPTED
     assert command(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 100_000) == \
         M.MAV_RESULT_ACCEPTED
@@ -159,7 +159,7 @@ def test_roi_location_keeps_the_gimbal_on_target_while_the_vehicle_flies(gimbal)
 
     def pointing_error_deg(r_att, r_pos) -> float:
         """Angle between where the gimbal looks and where the target is, from the vehicle."""
-        from gcsd.sim import geo
+        from gcsd.vehicle.sim import geo
         _roll, pitch, yaw_bf = euler(list(r_att.msg.q))
         lat, lon, alt = r_pos.msg.lat / 1e7, r_pos.msg.lon / 1e7, r_pos.msg.relative_alt / 1000
         heading = math.radians(r_pos.msg.hdg / 100)
@@ -182,7 +182,7 @@ def test_roi_location_keeps_the_gimbal_on_target_while_the_vehicle_flies(gimbal)
         att = wait_for(gcs, lambda r: r.type == "GIMBAL_DEVICE_ATTITUDE_STATUS", since=gcs.mark())
         assert pos is not None and att is not None
         errors.append(pointing_error_deg(att, pos))
-    from gcsd.sim import geo
+    from gcsd.vehicle.sim import geo
     travelled = geo.distance_m(climbed.msg.lat / 1e7, climbed.msg.lon / 1e7, pos.msg.lat / 1e7, pos.msg.lon / 1e7)
     assert travelled > 20, f"the vehicle did not fly ({travelled:.1f} m)"
     # 5.9 deg measured: a 60 deg/s slew lags the vehicle turning towards its new course
@@ -206,7 +206,7 @@ def test_roi_sysid_points_at_the_other_systems_reported_position(gimbal, client)
     """DO_SET_ROI_SYSID 7: the gimbal points at wherever system 7's GLOBAL_POSITION_INT says it is (read
     from any link, as ArduPilot's mount), and follows it when it moves."""
     gcs = gimbal
-    from gcsd.sim.geo import offset
+    from gcsd.vehicle.sim.geo import offset
     assert command(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL, DEVICE_STATUS, 100_000) == M.MAV_RESULT_ACCEPTED
     assert command(gcs, M.MAV_CMD_DO_SET_ROI_SYSID, 7) == M.MAV_RESULT_ACCEPTED
     host, port = gcs.conn.destination_addr

@@ -19,8 +19,8 @@ import pytest
 import yaml
 
 from gcsd.config import parse_config
-from gcsd.gcs import GCS
-from gcsd.sim import Landed
+from gcsd.daemon.daemon import GCS
+from gcsd.vehicle.sim import Landed
 
 from .helpers import VEHICLE, Client, M, is_ack, packed, pump, udp_channel, udp_url, wait_for
 from .test_signing import KEY, answered_request, arm_ack, now_units, sign, signed_daemon
@@ -217,7 +217,7 @@ def test_radio_status_does_not_set_a_peers_version(daemon, client):
 # --- error boundaries ----------------------------------------------------------------------
 
 def test_a_raising_producer_is_counted_and_everything_else_keeps_streaming(daemon, client, tmp_path):
-    from gcsd import telemetry
+    from gcsd.vehicle import telemetry
 
     def broken(view, channel, now):
         raise RuntimeError("deliberately broken producer")

@@ -14,8 +14,8 @@ from dataclasses import replace
 
 import pytest
 
-from gcsd.mission import wpl
-from gcsd.mission.items import MissionItem
+from gcsd.vehicle.mission import wpl
+from gcsd.vehicle.mission.items import MissionItem
 
 from .helpers import VEHICLE, Client, M, from_vehicle, is_ack, is_type, pump, udp_channel, udp_url, wait_for
 from .mission_client import MissionClient

@@ -314,7 +314,7 @@ def test_websocket_clients_are_bounded(api):
 
     import aiohttp
 
-    from gcsd.http.routes import MAX_WEBSOCKETS
+    from gcsd.api.http.routes import MAX_WEBSOCKETS
 
     _, url, _ = api
     ws_url = url.replace("http://", "ws://") + "/v1/ws/mavlink?filter=^HEARTBEAT$"

@@ -17,8 +17,8 @@ from pathlib import Path
 
 from tests.unit.test_http_plan_fence import normalised, qgc_plan
 
-from gcsd.mission import wpl
-from gcsd.mission.items import MissionItem
+from gcsd.vehicle.mission import wpl
+from gcsd.vehicle.mission.items import MissionItem
 
 from .helpers import VEHICLE, M, is_type, udp_url, wait_for
 from .http_client import call, poll

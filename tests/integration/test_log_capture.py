@@ -13,8 +13,8 @@ import pytest
 from pymavlink import DFReader
 
 from fake_logger_fc import FakeLoggerFC
-from gcsd.logs.simlog import FlightRecorder
-from gcsd.sim.state import VehicleState
+from gcsd.payloads.logs.simlog import FlightRecorder
+from gcsd.vehicle.sim.state import VehicleState
 
 from .helpers import M, pump, udp_channel, udp_url, wait_for
 

@@ -16,7 +16,7 @@ from dataclasses import replace
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.mission import MissionItem
+from gcsd.vehicle.mission import MissionItem
 
 from .helpers import VEHICLE, is_ack, is_type, udp_channel, udp_url, wait_for
 from .mission_client import LossyProxy, MissionClient

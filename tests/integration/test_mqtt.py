@@ -32,10 +32,10 @@ import pytest
 import yaml
 from paho.mqtt.enums import CallbackAPIVersion
 
-from gcsd.channel import Channel
 from gcsd.config import parse_config
-from gcsd.mission import MissionItem
-from gcsd.mqtt import MqttLink
+from gcsd.links.channel import Channel
+from gcsd.links.mqtt import MqttLink
+from gcsd.vehicle.mission import MissionItem
 
 from .bridge import NullModem
 from .helpers import Client, M, pump, pump_until, udp_channel, udp_url, wait_for

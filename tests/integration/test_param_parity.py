@@ -13,9 +13,9 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.config import DEFAULT_STREAM_RATES_HZ
-from gcsd.ftp.protocol import Op, Payload
-from gcsd.params import ParamStore, as_float
-from gcsd.vehicles import VEHICLE_TYPES, vehicle_params
+from gcsd.vehicle.ftp.protocol import Op, Payload
+from gcsd.vehicle.params import ParamStore, as_float
+from gcsd.vehicle.types import VEHICLE_TYPES, vehicle_params
 
 from .helpers import VEHICLE, download_params, is_type, pump, udp_channel, udp_url, wait_for
 

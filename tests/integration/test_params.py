@@ -13,8 +13,8 @@ import time
 
 import pytest
 
-from gcsd.params import parameter_set
-from gcsd.params.parmfile import read_parm
+from gcsd.vehicle.params import parameter_set
+from gcsd.vehicle.params.parmfile import read_parm
 
 from .helpers import Client, M, download_params, is_type, pump, rate_hz, udp_channel, udp_url, wait_for
 

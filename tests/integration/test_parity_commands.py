@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import all as ALL  # the probe names commands newer than ardupilotmega.xml here
 
-from gcsd.vehicles import vehicle_type
+from gcsd.vehicle.types import vehicle_type
 
 from .helpers import M, wait_for
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from gcsd import control
+from gcsd.api import control
 
 from .helpers import (
     VEHICLE,

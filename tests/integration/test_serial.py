@@ -9,7 +9,7 @@ import tty
 
 import pytest
 
-from gcsd.scheduler import SERVICE_SHARE
+from gcsd.links.scheduler import SERVICE_SHARE
 
 from .helpers import VEHICLE, M, packed, read_fd
 

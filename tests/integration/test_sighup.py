@@ -17,8 +17,8 @@ import sys
 import time
 from pathlib import Path
 
-from gcsd import control
-from gcsd.params.parmfile import read_parm
+from gcsd.api import control
+from gcsd.vehicle.params.parmfile import read_parm
 
 from .helpers import VEHICLE, Client, M, wait_for
 from .test_service import env_with_venv, free_udp_port, stop, write_config

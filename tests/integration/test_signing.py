@@ -5,7 +5,7 @@ from __future__ import annotations
 import hashlib
 import time
 
-from gcsd.signing import EPOCH_2015_S, UNITS_PER_S
+from gcsd.wire.signing import EPOCH_2015_S, UNITS_PER_S
 
 from .helpers import Client, M, is_ack, pump, udp_channel, udp_url, wait_for
 

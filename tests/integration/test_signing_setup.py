@@ -4,7 +4,7 @@ mute the vehicle, before or after a restart, and a timestamp saved by an earlier
 
 from __future__ import annotations
 
-from gcsd.signing import UNITS_PER_S
+from gcsd.wire.signing import UNITS_PER_S
 
 from .helpers import Client, M, udp_channel, udp_url, wait_for
 from .test_signing import KEY, arm_ack, now_units, sign

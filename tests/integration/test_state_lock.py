@@ -12,7 +12,7 @@ import subprocess
 import sys
 import time
 
-from gcsd import control
+from gcsd.api import control
 
 from .test_service import env_with_venv, free_udp_port, stop, write_config
 

@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 from pymavlink import mavutil
 
-from gcsd import speedups
 from gcsd.loop import loop_name
+from gcsd.wire import speedups
 
 from .helpers import M, udp_url
 

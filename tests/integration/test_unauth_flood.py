@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from gcsd import control
+from gcsd.api import control
 
 from .helpers import Client, tcp_url
 from .test_service import env_with_venv, stop

@@ -37,8 +37,8 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.mission import wpl
-from gcsd.mission.items import MissionItem
+from gcsd.vehicle.mission import wpl
+from gcsd.vehicle.mission.items import MissionItem
 
 pytest.importorskip("MAVProxy", reason="MAVProxy is a test extra: pip install -e .[test]")
 pytest.importorskip("mavsdk.asyncio", reason="mavsdk is a test extra: pip install -e .[test]")

@@ -19,8 +19,8 @@ from pathlib import Path
 import pytest
 from pymavlink import DFReader
 
-from gcsd.logs.simlog import FlightRecorder
-from gcsd.sim.state import VehicleState
+from gcsd.payloads.logs.simlog import FlightRecorder
+from gcsd.vehicle.sim.state import VehicleState
 
 pytest.importorskip("MAVProxy", reason="MAVProxy is a test extra: pip install -e .[test]")
 pytest.importorskip("mavsdk.asyncio", reason="mavsdk is a test extra: pip install -e .[test]")

@@ -1,6 +1,6 @@
 """Real clients through a link that loses 20 % of the datagrams in each direction, with gcsd's
 default configuration (only the port is the test's): the transfers the vehicle drives must get
-through on re-requests timed by the measured round trip (gcsd.rtt), not ArduPilot's fixed 1 s.
+through on re-requests timed by the measured round trip (gcsd.vehicle.mission.rtt), not ArduPilot's fixed 1 s.
 
 - MAVSDK `mission_raw.upload_mission`: MAVSDK never resends an item on its own; it answers each
   MISSION_REQUEST and abandons the upload after 5 sends of one item or 5 of its 0.5 s timeouts.

@@ -29,7 +29,7 @@ pytest.importorskip("mavsdk.asyncio", reason="mavsdk is a test extra: pip instal
 from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync, MissionRawError
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.mission.items import MissionItem
+from gcsd.vehicle.mission.items import MissionItem
 from integration.helpers import Client, udp_channel, udp_url
 from integration.mission_client import LossyProxy, MissionClient
 

@@ -33,7 +33,7 @@ from mavsdk.asyncio.plugins.mission_raw import MissionItem, MissionRawAsync, Mis
 from mavsdk.plugins.mavlink_direct import MavlinkMessage
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.mission import MissionItem as Item
+from gcsd.vehicle.mission import MissionItem as Item
 from integration.helpers import Client, udp_url
 from integration.mission_client import LossyProxy, MissionClient
 
@@ -379,7 +379,7 @@ def retried(process, line: str, pattern: str, attempt_s: float, attempts: int, w
 @pytest.mark.skipif(not os.environ.get("GCSD_LONG_TESTS"), reason=LONG_REASON)
 def test_mavproxy_round_trips_500_items_through_20_percent_loss(gcsd_daemon, mavproxy, tmp_path):
     """MAVProxy answers each MISSION_REQUEST; gcsd re-requests what is lost after its adaptive
-    timeout (the default configuration: tens of ms on loopback, see gcsd.rtt). MAVProxy stops answering once it has sent the last item, so a lost last
+    timeout (the default configuration: tens of ms on loopback, see gcsd.vehicle.mission.rtt). MAVProxy stops answering once it has sent the last item, so a lost last
     item (or a lost ACK) fails that upload: the command is repeated, as its user would. Downloading,
     MAVProxy asks 5 items ahead and asks again only after 2 s, so every lost item costs it 2 s,
     and a lost MISSION_REQUEST_LIST or MISSION_COUNT is never asked again: `wp save` is repeated

@@ -25,7 +25,7 @@ from mavsdk.asyncio.plugins.mission_raw import MissionItem, MissionRawAsync
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.sim.geo import distance_m, offset
+from gcsd.vehicle.sim.geo import distance_m, offset
 
 DISCOVERY_WAIT_S = 5.0
 SPEEDUP = 10

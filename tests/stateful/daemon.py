@@ -22,10 +22,10 @@ from pathlib import Path
 
 import yaml
 
-from gcsd import control
-from gcsd.mission import wpl
-from gcsd.params.parmfile import read_parm
-from gcsd.signing import SigningStore
+from gcsd.api import control
+from gcsd.vehicle.mission import wpl
+from gcsd.vehicle.params.parmfile import read_parm
+from gcsd.wire.signing import SigningStore
 
 REPO_SRC = Path(__file__).resolve().parents[2] / "src"
 START_TIMEOUT_S = 20.0

@@ -6,7 +6,7 @@ loops with a finite repeat count (back to any earlier item, or to an index out o
 a landing or RTL; now and then an item has a random command, frame or a NaN parameter, which the
 daemon may refuse (any MISSION_ACK is an answer; what it accepted must be on disk).
 
-Parameters come from the copter's own list (gcsd.params.defs), minus the ones the test cannot
+Parameters come from the copter's own list (gcsd.vehicle.params.defs), minus the ones the test cannot
 treat as plain values (`NOT_WRITTEN`, each with why).
 """
 
@@ -17,8 +17,8 @@ import math
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.params.defs import parameter_set
-from gcsd.params.store import INT8, INT16, INT32, REAL32
+from gcsd.vehicle.params.defs import parameter_set
+from gcsd.vehicle.params.store import INT8, INT16, INT32, REAL32
 
 HOME_E7 = (-353632620, 1491652370)  # the default home
 MISSION, FENCE, RALLY = M.MAV_MISSION_TYPE_MISSION, M.MAV_MISSION_TYPE_FENCE, M.MAV_MISSION_TYPE_RALLY

@@ -18,7 +18,7 @@ from collections.abc import Callable
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.signing import EPOCH_2015_S, UNITS_PER_S
+from gcsd.wire.signing import EPOCH_2015_S, UNITS_PER_S
 
 GCS_HEARTBEAT = M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3)
 

@@ -69,7 +69,7 @@ from hypothesis.stateful import (
 )
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.signing import EPOCH_2015_S, SAVE_INTERVAL_S, UNITS_PER_S
+from gcsd.wire.signing import EPOCH_2015_S, SAVE_INTERVAL_S, UNITS_PER_S
 
 from . import plans
 from .daemon import Daemon

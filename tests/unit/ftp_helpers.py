@@ -3,10 +3,10 @@
 
 from __future__ import annotations
 
-from gcsd.ftp.fs import ConfinedFs
-from gcsd.ftp.protocol import Nak, Op, Payload
-from gcsd.ftp.server import FtpServer
-from gcsd.ftp.virtual import VirtualFiles
+from gcsd.vehicle.ftp.fs import ConfinedFs
+from gcsd.vehicle.ftp.protocol import Nak, Op, Payload
+from gcsd.vehicle.ftp.server import FtpServer
+from gcsd.vehicle.ftp.virtual import VirtualFiles
 
 
 def make_server(root, max_file_bytes: int = 1 << 20, params=None) -> FtpServer:

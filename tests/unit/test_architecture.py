@@ -21,14 +21,14 @@ import yaml
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.boundary import ErrorCounts
-from gcsd.channel import Channel
 from gcsd.clock import Clock
-from gcsd.compose import COMMAND, OVERRIDES, DuplicateRegistration, Registry, build_vehicle
 from gcsd.config import VEHICLE_TYPES, parse_config
-from gcsd.context import CONTEXT_MEMBERS
-from gcsd.services import Service
-from gcsd.signing import SigningManager
-from gcsd.telemetry.view import VIEW_MEMBERS
+from gcsd.daemon.compose import COMMAND, OVERRIDES, DuplicateRegistration, Registry, build_vehicle
+from gcsd.links.channel import Channel
+from gcsd.vehicle.context import CONTEXT_MEMBERS
+from gcsd.vehicle.services import Service
+from gcsd.vehicle.telemetry.view import VIEW_MEMBERS
+from gcsd.wire.signing import SigningManager
 
 SRC = Path(__file__).resolve().parents[2] / "src"
 PACKAGE = SRC / "gcsd"
@@ -190,11 +190,13 @@ def test_without_the_overrides_the_real_tables_do_not_build(tmp_path):
 
 # --- the narrow context ---------------------------------------------------------------------------
 
-CONTEXT_USERS = [*sorted((PACKAGE / "services").glob("*.py")), *sorted((PACKAGE / "autopilot").glob("*.py")),
-                 PACKAGE / "gimbal" / "service.py", PACKAGE / "camera" / "service.py", PACKAGE / "can" / "service.py",
-                 PACKAGE / "vehicles" / "commands.py", PACKAGE / "vehicles" / "prearm.py",
-                 PACKAGE / "vehicles" / "health.py", PACKAGE / "vehicles" / "motors.py"]
-VIEW_USERS = sorted((PACKAGE / "telemetry").glob("*.py"))
+VEHICLE = PACKAGE / "vehicle"
+PAYLOADS = PACKAGE / "payloads"
+CONTEXT_USERS = [*sorted((VEHICLE / "services").glob("*.py")), *sorted((VEHICLE / "autopilot").glob("*.py")),
+                 PAYLOADS / "gimbal" / "service.py", PAYLOADS / "camera" / "service.py", PAYLOADS / "can" / "service.py",
+                 VEHICLE / "types" / "commands.py", VEHICLE / "types" / "prearm.py",
+                 VEHICLE / "types" / "health.py", VEHICLE / "types" / "motors.py"]
+VIEW_USERS = sorted((VEHICLE / "telemetry").glob("*.py"))
 
 
 def _reached(path: Path) -> set[str]:
@@ -226,6 +228,6 @@ def test_telemetry_producers_read_only_the_view(path):
 
 def test_no_module_reaches_the_simulation_or_control_through_a_node_or_by_getattr():
     banned = ("node.sim", "node.control", "getattr(node", "getattr(self.node", "getattr(self.ctx", "getattr(ctx,")
-    scanned = [p for d in ("services", "vehicles", "autopilot", "telemetry") for p in (PACKAGE / d).rglob("*.py")]
+    scanned = [p for d in ("services", "types", "autopilot", "telemetry") for p in (VEHICLE / d).rglob("*.py")]
     found = [f"{p.relative_to(PACKAGE)}: {b}" for p in scanned for b in banned if b in p.read_text()]
     assert found == []

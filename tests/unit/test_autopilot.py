@@ -9,8 +9,8 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 from vehicle_harness import Harness
 
-from gcsd.mission import MissionItem
-from gcsd.sim.geo import distance_m, offset
+from gcsd.vehicle.mission import MissionItem
+from gcsd.vehicle.sim.geo import distance_m, offset
 
 ACCEPTED, FAILED, DENIED = M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_FAILED, M.MAV_RESULT_DENIED
 REL = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT

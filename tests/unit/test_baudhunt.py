@@ -1,6 +1,6 @@
 """The baud list of a serial channel: tried in turn until a good frame, then kept (fake clock)."""
 
-from gcsd.baudhunt import PROBE_S, BaudHunt
+from gcsd.links.baudhunt import PROBE_S, BaudHunt
 
 
 def test_bauds_are_tried_in_turn_until_a_good_frame():

@@ -8,7 +8,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 from vehicle_harness import Harness
 
-from gcsd.services import accelcal, magcal
+from gcsd.vehicle.services import accelcal, magcal
 
 ACCEPTED, FAILED = M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_FAILED
 POS = M.MAV_CMD_ACCELCAL_VEHICLE_POS

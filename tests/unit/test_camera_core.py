@@ -1,4 +1,4 @@
-"""The camera core (gcsd.camera) with a fake clock: AP_Camera's answers, single, interval, count
+"""The camera core (gcsd.payloads.camera) with a fake clock: AP_Camera's answers, single, interval, count
 and distance-triggered photos with the pose of their instant, zoom, focus, storage; the JPEG's
 EXIF position is the photo's."""
 
@@ -9,10 +9,10 @@ import itertools
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.camera import messages
-from gcsd.camera.camera import IMAGE, MIN_INTERVAL_S, VIDEO, Camera, CameraPose
-from gcsd.camera.jpeg import encode, read_position
-from gcsd.sim.geo import offset
+from gcsd.payloads.camera import messages
+from gcsd.payloads.camera.camera import IMAGE, MIN_INTERVAL_S, VIDEO, Camera, CameraPose
+from gcsd.payloads.camera.jpeg import encode, read_position
+from gcsd.vehicle.sim.geo import offset
 
 ACCEPTED, DENIED, UNSUPPORTED = M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_DENIED, M.MAV_RESULT_UNSUPPORTED
 HOME = (-35.363262, 149.165237)

@@ -8,9 +8,9 @@ from types import SimpleNamespace
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.camera.jpeg import read_position
-from gcsd.camera.service import CAMERA_COMPID, HEARTBEAT_INTERVAL_S, OUTBOX_MAX, CameraService
-from gcsd.sim.state import VehicleState
+from gcsd.payloads.camera.jpeg import read_position
+from gcsd.payloads.camera.service import CAMERA_COMPID, HEARTBEAT_INTERVAL_S, OUTBOX_MAX, CameraService
+from gcsd.vehicle.sim.state import VehicleState
 
 
 class FakeChannel:

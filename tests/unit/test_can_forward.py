@@ -1,11 +1,11 @@
-"""CAN over MAVLink's core (gcsd.can.forward) with a fake clock: AP_MAVLinkCAN's answers, the 5 s
+"""CAN over MAVLink's core (gcsd.payloads.can.forward) with a fake clock: AP_MAVLinkCAN's answers, the 5 s
 timeout, filters, several clients, the bounded inbound buffer."""
 
 from __future__ import annotations
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.can.forward import (
+from gcsd.payloads.can.forward import (
     EXTENDED_FLAG,
     FORWARD_TIMEOUT_S,
     INBOUND_BUFFER,

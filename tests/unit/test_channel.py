@@ -13,9 +13,9 @@ import yaml
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.channel import MAX_FRAME_BYTES, UDP_PEER_TIMEOUT_S, Channel
 from gcsd.config import parse_config
-from gcsd.outbox import TokenBucket
+from gcsd.links.channel import MAX_FRAME_BYTES, UDP_PEER_TIMEOUT_S, Channel
+from gcsd.links.outbox import TokenBucket
 
 T0 = 1000.0
 handed_on: dict[Channel, list] = {}
@@ -381,7 +381,7 @@ def test_a_reply_finds_the_budget_spent_is_queued_not_dropped_and_goes_out_when_
 
 
 def test_the_reply_queue_is_bounded_and_counts_what_it_drops():
-    from gcsd.outbox import REPLY_QUEUE_MAX
+    from gcsd.links.outbox import REPLY_QUEUE_MAX
 
     clock = Clock()
     ch, _sent = make_channel(clock, bandwidth=1000)

@@ -8,8 +8,8 @@ import pytest
 from pymavlink.dialects.v10 import ardupilotmega as M1
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.channel import Channel
 from gcsd.config import parse_config
+from gcsd.links.channel import Channel
 
 
 def make_channel(**extra) -> tuple[Channel, dict, list]:

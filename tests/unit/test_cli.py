@@ -12,10 +12,10 @@ import structlog
 from logging_fixture import restore_logging  # noqa: F401  (an autouse fixture)
 
 import gcsd
-from gcsd import speedups
-from gcsd.cli import main
 from gcsd.config import default_config, load_config
+from gcsd.daemon.cli import main
 from gcsd.loop import loop_name
+from gcsd.wire import speedups
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_YAML = REPO / "config" / "gcsd.yaml"
@@ -31,22 +31,22 @@ def bad_config(tmp_path):
 
 @pytest.fixture
 def daemon(monkeypatch):
-    """A stand-in for gcsd.app: records the configs it was run with, returns `exit_code`."""
-    app = types.ModuleType("gcsd.app")
+    """A stand-in for gcsd.daemon.app: records the configs it was run with, returns `exit_code`."""
+    app = types.ModuleType("gcsd.daemon.app")
     app.runs = []
     app.exit_code = 0
     app.failure = None
 
     async def run_daemon(config):
         app.runs.append(config)
-        structlog.get_logger("gcsd.app").info("daemon_started", sysid=config.vehicle.sysid)
-        structlog.get_logger("gcsd.app").debug("detail_logged")
+        structlog.get_logger("gcsd.daemon.app").info("daemon_started", sysid=config.vehicle.sysid)
+        structlog.get_logger("gcsd.daemon.app").debug("detail_logged")
         if app.failure:
             raise app.failure
         return app.exit_code
 
     app.run_daemon = run_daemon
-    monkeypatch.setitem(sys.modules, "gcsd.app", app)
+    monkeypatch.setitem(sys.modules, "gcsd.daemon.app", app)
     yield app
 
 
@@ -196,7 +196,7 @@ STATUS = {
 
 
 def test_status_tables_have_titles_units_and_mav_type_names():
-    from gcsd.control import format_status
+    from gcsd.api.control import format_status
 
     text = format_status(STATUS, {"pid": 4321, "config": "/etc/gcsd/gcsd.yaml"})
     lines = text.splitlines()
@@ -215,7 +215,7 @@ def test_status_tables_have_titles_units_and_mav_type_names():
 
 
 def test_status_shows_none_for_empty_tables():
-    from gcsd.control import format_status
+    from gcsd.api.control import format_status
 
     text = format_status({**STATUS, "routes": [], "errors": {}})
     assert "Routes learned: none" in text.splitlines()
@@ -226,7 +226,7 @@ def test_status_shows_none_for_empty_tables():
 @pytest.mark.parametrize(("mav_type", "name"), [(2, "QUADROTOR"), (1, "FIXED_WING"), (6, "GCS"), (None, "-"),
                                                 (999, "999")])
 def test_mav_type_names(mav_type, name):
-    from gcsd.control import mav_type_name
+    from gcsd.api.control import mav_type_name
 
     assert mav_type_name(mav_type) == name
 
@@ -262,7 +262,7 @@ def test_status_of_a_socket_that_is_not_gcsd_exits_1_with_one_line(tmp_path, mon
 
 
 def test_status_table_shows_what_was_dropped_on_purpose():
-    from gcsd.control import format_status
+    from gcsd.api.control import format_status
 
     channel = {**STATUS["channels"][0], "spoofed_dropped": 31, "retained_dropped": 32, "loop_dropped": 33,
                "unauthenticated_closed": 34, "accept_failures": 35}

@@ -1,6 +1,6 @@
 """Framing on top of pymavlink: raw bytes kept, unknown ids kept, resync after a false start.
 Every test runs against both FrameParser.feed implementations: Python and the compiled one
-(gcsd.speedups; tests/unit/test_speedups.py compares them on random streams)."""
+(gcsd.wire.speedups; tests/unit/test_speedups.py compares them on random streams)."""
 
 from __future__ import annotations
 
@@ -10,15 +10,15 @@ import struct
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd import codec, speedups
-from gcsd.codec import Encoder, FrameParser
+from gcsd.wire import codec, speedups
+from gcsd.wire.codec import Encoder, FrameParser
 
 
 @pytest.fixture(autouse=True, params=["python", "c"])
 def implementation(request, monkeypatch):
     if request.param == "c":
         if speedups.compiled is None:
-            pytest.skip("gcsd._speedups is not built (test_speedups fails for that in CI)")
+            pytest.skip("gcsd.wire._speedups is not built (test_speedups fails for that in CI)")
         monkeypatch.setattr(codec, "_feed", speedups.compiled.feed)
     else:
         monkeypatch.setattr(codec, "_feed", codec.feed_python)

@@ -7,7 +7,7 @@ import math
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.services.command_rules import RULES, STRICT, check, rule
+from gcsd.vehicle.services.command_rules import RULES, STRICT, check, rule
 
 NAN, INF = math.nan, math.inf
 REL = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT

@@ -7,13 +7,13 @@ from __future__ import annotations
 import yaml
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd import compose
 from gcsd.clock import Clock
-from gcsd.codec import FrameParser
 from gcsd.config import parse_config
-from gcsd.gcs import GCS
-from gcsd.msgids import ACCEPTED
-from gcsd.services import Service
+from gcsd.daemon import compose
+from gcsd.daemon.daemon import GCS
+from gcsd.vehicle.services import Service
+from gcsd.wire.codec import FrameParser
+from gcsd.wire.msgids import ACCEPTED
 
 CAMERA = 100
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from gcsd.config import ConfigError, default_config, parse_config
-from gcsd.config_can import CanBusConfig
+from gcsd.config.can import CanBusConfig
 
 
 def problems(text: str) -> list[str]:

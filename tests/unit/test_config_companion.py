@@ -7,7 +7,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.config import ConfigError, parse_config
-from gcsd.config_companion import ChannelFilter, FilterRules, RoutingConfig
+from gcsd.config.companion import ChannelFilter, FilterRules, RoutingConfig
 
 
 def config(channel: str, top: str = ""):
@@ -109,7 +109,7 @@ def test_host_names_are_accepted_as_addresses():
 
 
 def test_check_config_reports_companion_keys_as_file_line_key_path(tmp_path, capsys):
-    from gcsd.cli import main
+    from gcsd.daemon.cli import main
 
     conf = tmp_path / "companion.yaml"
     conf.write_text(dedent(f"""\

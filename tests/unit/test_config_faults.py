@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 from logging_fixture import restore_logging  # noqa: F401  (an autouse fixture)
 
-from gcsd.cli import main
 from gcsd.config import ConfigError, parse_config
+from gcsd.daemon.cli import main
 
 REPO = Path(__file__).resolve().parents[2]
 LOOPBACK = '[{name: gcs, type: udp-server, address: "127.0.0.1:0"}]'

@@ -4,9 +4,8 @@ from textwrap import dedent
 
 import pytest
 
-from gcsd import preflight
-from gcsd.cli import main
-from gcsd.config import ConfigError, default_config, parse_config
+from gcsd.config import ConfigError, default_config, parse_config, preflight
+from gcsd.daemon.cli import main
 
 
 def parse(text: str):

@@ -7,9 +7,9 @@ from textwrap import dedent
 import pytest
 from logging_fixture import restore_logging  # noqa: F401  (an autouse fixture)
 
-from gcsd.cli import main
 from gcsd.config import ConfigError, default_config, parse_config
-from gcsd.config_logs import FlightLogsConfig
+from gcsd.config.logs import FlightLogsConfig
+from gcsd.daemon.cli import main
 
 
 def problems(text: str) -> list[str]:

@@ -7,8 +7,8 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.config import ConfigError, load_config, parse_config
-from gcsd.config_mqtt import MqttConfig, parse_broker, route_capacity
-from gcsd.mqtt import Topics, frame_source, frame_target_system, topic_source_sysid
+from gcsd.config.mqtt import MqttConfig, parse_broker, route_capacity
+from gcsd.links.mqtt import Topics, frame_source, frame_target_system, topic_source_sysid
 
 
 def channel(extra: str) -> str:

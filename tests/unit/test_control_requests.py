@@ -5,7 +5,7 @@ import asyncio
 import json
 import socket
 
-from gcsd import control
+from gcsd.api import control
 
 
 def _ask(path, payload: bytes | None) -> dict:

@@ -1,18 +1,19 @@
 """RecentFrames (dedup.py): exact bytes remembered for exactly window_s, bounded, on a float clock.
-Every test runs on both implementations (Python, and C when gcsd._speedups is built);
+Every test runs on both implementations (Python, and C when gcsd.wire._speedups is built);
 tests/unit/test_speedups.py compares them on random sequences."""
 
 from __future__ import annotations
 
 import pytest
 
-from gcsd import dedup, speedups
-from gcsd.dedup import LOOP_WINDOW_S
+from gcsd.routing import dedup
+from gcsd.routing.dedup import LOOP_WINDOW_S
+from gcsd.wire import speedups
 
 IMPLEMENTATIONS = [
     pytest.param(dedup.RecentFramesPython, id="python"),
     pytest.param(speedups.compiled.RecentFrames if speedups.compiled else None, id="c",
-                 marks=pytest.mark.skipif(speedups.compiled is None, reason="gcsd._speedups is not built")),
+                 marks=pytest.mark.skipif(speedups.compiled is None, reason="gcsd.wire._speedups is not built")),
 ]
 RecentFrames = dedup.RecentFrames
 

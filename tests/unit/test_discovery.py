@@ -1,11 +1,11 @@
-"""Broadcast discovery's lock (gcsd.discovery) with a float clock, and its configuration key."""
+"""Broadcast discovery's lock (gcsd.links.discovery) with a float clock, and its configuration key."""
 
 from __future__ import annotations
 
 import pytest
 
 from gcsd.config import ConfigError, parse_config
-from gcsd.discovery import STATION_SILENT_S, BroadcastLock
+from gcsd.links.discovery import STATION_SILENT_S, BroadcastLock
 
 BCAST = ("255.255.255.255", 14550)
 QGC = ("192.168.1.20", 14550)

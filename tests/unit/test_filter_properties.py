@@ -5,9 +5,9 @@ frame per period through, plus the first."""
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gcsd.config_companion import FilterRules
-from gcsd.filters import FrameFilter
-from gcsd.ratecap import SLACK_S, RateCaps
+from gcsd.config.companion import FilterRules
+from gcsd.routing.filters import FrameFilter
+from gcsd.routing.ratecap import SLACK_S, RateCaps
 
 MSGIDS = st.sampled_from([0, 1, 24, 30, 33, 74, 76, 253, 12915])
 BYTES = st.integers(0, 255)

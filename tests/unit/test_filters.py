@@ -3,11 +3,11 @@
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.codec import Encoder
 from gcsd.config import parse_config
-from gcsd.config_companion import FilterRules
-from gcsd.filters import FrameFilter, gates, header
-from gcsd.ratecap import MAX_SOURCES, RateCaps
+from gcsd.config.companion import FilterRules
+from gcsd.routing.filters import FrameFilter, gates, header
+from gcsd.routing.ratecap import MAX_SOURCES, RateCaps
+from gcsd.wire.codec import Encoder
 
 ATT = M.MAVLINK_MSG_ID_ATTITUDE
 HB = M.MAVLINK_MSG_ID_HEARTBEAT

@@ -10,7 +10,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from test_autopilot import flying
 from vehicle_harness import Harness
 
-from gcsd.vehicles.motors import rover_throttle_pwm
+from gcsd.vehicle.types.motors import rover_throttle_pwm
 
 ACCEPTED = M.MAV_RESULT_ACCEPTED
 

@@ -11,12 +11,12 @@ import pytest
 from ftp_helpers import Gcs, errno_of, is_ack, nak_code
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.ftp.fs import ConfinedFs
-from gcsd.ftp.mission_files import MissionFiles, decode_plan, encode_plan
-from gcsd.ftp.protocol import Nak, Op
-from gcsd.ftp.server import FtpServer
-from gcsd.ftp.virtual import VirtualFiles
-from gcsd.mission.items import MissionItem
+from gcsd.vehicle.ftp.fs import ConfinedFs
+from gcsd.vehicle.ftp.mission_files import MissionFiles, decode_plan, encode_plan
+from gcsd.vehicle.ftp.protocol import Nak, Op
+from gcsd.vehicle.ftp.server import FtpServer
+from gcsd.vehicle.ftp.virtual import VirtualFiles
+from gcsd.vehicle.mission.items import MissionItem
 
 MISSION, FENCE, RALLY = M.MAV_MISSION_TYPE_MISSION, M.MAV_MISSION_TYPE_FENCE, M.MAV_MISSION_TYPE_RALLY
 

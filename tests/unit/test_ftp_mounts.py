@@ -6,8 +6,8 @@ import os
 
 import pytest
 
-from gcsd.ftp.fs import ConfinedFs, DirEntry
-from gcsd.ftp.protocol import FtpError, Nak
+from gcsd.vehicle.ftp.fs import ConfinedFs, DirEntry
+from gcsd.vehicle.ftp.protocol import FtpError, Nak
 
 
 @pytest.fixture

@@ -13,9 +13,9 @@ import pytest
 from ftp_helpers import Gcs, errno_of, is_ack, make_server, nak_code
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.ftp.parampck import PckQuery, decode_upload, encode, parse_query
-from gcsd.ftp.protocol import FtpError, Nak, Op
-from gcsd.ftp.virtual import VirtualFiles
+from gcsd.vehicle.ftp.parampck import PckQuery, decode_upload, encode, parse_query
+from gcsd.vehicle.ftp.protocol import FtpError, Nak, Op
+from gcsd.vehicle.ftp.virtual import VirtualFiles
 
 param_ftp = pytest.importorskip("MAVProxy.modules.lib.param_ftp")
 

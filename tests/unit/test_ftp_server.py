@@ -11,7 +11,7 @@ import zlib
 import pytest
 from ftp_helpers import Gcs, errno_of, is_ack, make_server, nak_code
 
-from gcsd.ftp.burst import (
+from gcsd.vehicle.ftp.burst import (
     ADD_PPS,
     BURST_PACKETS,
     HOLD_PACKETS,
@@ -21,8 +21,8 @@ from gcsd.ftp.burst import (
     SLACK_S,
     START_PPS,
 )
-from gcsd.ftp.protocol import DATA_MAX, Nak, Op, Payload, crc32_ardupilot
-from gcsd.ftp.server import MAX_SESSIONS, SESSION_IDLE_S
+from gcsd.vehicle.ftp.protocol import DATA_MAX, Nak, Op, Payload, crc32_ardupilot
+from gcsd.vehicle.ftp.server import MAX_SESSIONS, SESSION_IDLE_S
 
 
 @pytest.fixture

@@ -28,8 +28,8 @@ from pathlib import Path
 import pytest
 from ftp_helpers import Gcs, is_ack, make_server, nak_code
 
-from gcsd.ftp.fs import ConfinedFs
-from gcsd.ftp.protocol import FtpError, Nak, Op
+from gcsd.vehicle.ftp.fs import ConfinedFs
+from gcsd.vehicle.ftp.protocol import FtpError, Nak, Op
 
 SECRET = b"TOP-SECRET-OUTSIDE-CONTENT"
 MARKER = "OUTSIDE_NAME_MARKER"

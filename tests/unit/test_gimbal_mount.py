@@ -1,4 +1,4 @@
-"""The gimbal manager core (gcsd.gimbal.mount) with a fake clock: ArduPilot 4.6's AP_Mount answers,
+"""The gimbal manager core (gcsd.payloads.gimbal.mount) with a fake clock: ArduPilot 4.6's AP_Mount answers,
 slewing at a finite rate, and pointing at a location while the vehicle moves."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import math
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.gimbal.geometry import euler, quaternion
-from gcsd.gimbal.mount import (
+from gcsd.payloads.gimbal.geometry import euler, quaternion
+from gcsd.payloads.gimbal.mount import (
     GPS_POINT,
     MAVLINK,
     NEUTRAL,
@@ -21,9 +21,9 @@ from gcsd.gimbal.mount import (
     MountParams,
     Pose,
 )
-from gcsd.gimbal.params import GROUP, mount_params, with_mount_params
-from gcsd.params.store import INT8, ParamDef
-from gcsd.sim.geo import offset
+from gcsd.payloads.gimbal.params import GROUP, mount_params, with_mount_params
+from gcsd.vehicle.params.store import INT8, ParamDef
+from gcsd.vehicle.sim.geo import offset
 
 NAN = math.nan
 HOME = (-35.363262, 149.165237, 584.0)

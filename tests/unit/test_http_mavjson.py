@@ -7,8 +7,7 @@ import math
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.codec import FrameParser
-from gcsd.http.mavjson import (
+from gcsd.api.http.mavjson import (
     BadMessage,
     UnknownMessage,
     message_json,
@@ -16,7 +15,8 @@ from gcsd.http.mavjson import (
     parse_message,
     template,
 )
-from gcsd.http.tree import MessageTree
+from gcsd.api.http.tree import MessageTree
+from gcsd.wire.codec import FrameParser
 
 # README.md, "GET /v1/helper/mavlink?name=HEARTBEAT", with base_mode in the {"bits": N} form SPEC pins
 README_HEARTBEAT_TEMPLATE = {

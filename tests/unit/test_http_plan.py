@@ -1,12 +1,12 @@
-"""QGroundControl .plan v2 <-> mission items (gcsd.http.plan)."""
+"""QGroundControl .plan v2 <-> mission items (gcsd.api.http.plan)."""
 
 import math
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.http.plan import PlanError, from_plan, to_plan
-from gcsd.mission.items import MissionItem
+from gcsd.api.http.plan import PlanError, from_plan, to_plan
+from gcsd.vehicle.mission.items import MissionItem
 
 HOME = MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 0, 1, 0, 0, 0, 0, -353632621, 1491652374, 584.0)
 # as QGroundControl writes one (a takeoff, a waypoint with NaN yaw written as null, a speed change)

@@ -1,4 +1,4 @@
-""".plan geoFence and rallyPoints <-> fence and rally items (gcsd.http.planfence), on a QGC example.
+""".plan geoFence and rallyPoints <-> fence and rally items (gcsd.api.http.planfence), on a QGC example.
 
 tests/data/qgc/fence_rally.plan is written by hand in QGroundControl's format (GeoFenceController,
 QGCFencePolygon, QGCFenceCircle, RallyPointController; keys sorted and indented as Qt writes them):
@@ -13,10 +13,10 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.http.plan import PlanError, from_plan, to_plan
-from gcsd.http.planfence import fence_json, rally_json
-from gcsd.mission.items import MissionItem
-from gcsd.mission.stores import FenceStore, RallyStore, validate
+from gcsd.api.http.plan import PlanError, from_plan, to_plan
+from gcsd.api.http.planfence import fence_json, rally_json
+from gcsd.vehicle.mission.items import MissionItem
+from gcsd.vehicle.mission.stores import FenceStore, RallyStore, validate
 
 QGC_FILE = Path(__file__).resolve().parents[1] / "data" / "qgc" / "fence_rally.plan"
 HOME = MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 0, 1, 0, 0, 0, 0, -353632621, 1491652374, 584.0)

@@ -14,9 +14,9 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as M
 from tests.unit.test_http_plan_fence import HOME, normalised, qgc_plan
 
-from gcsd.http.plan import PlanError, from_plan, to_plan
-from gcsd.mission.items import from_item_int, item_int_message
-from gcsd.mission.stores import FenceStore, RallyStore, validate
+from gcsd.api.http.plan import PlanError, from_plan, to_plan
+from gcsd.vehicle.mission.items import from_item_int, item_int_message
+from gcsd.vehicle.mission.stores import FenceStore, RallyStore, validate
 
 EDGES = [-1, 0, 1e-50, 255, 256, 65535, 65536, 2**31 - 1, 2**31, -(2**31) - 1, 2**64, 3.5e38, 1e39, 10**400]
 NUMBER = (st.none() | st.booleans() | st.sampled_from(EDGES) | st.integers(-70_000, 70_000)

@@ -2,7 +2,7 @@
 and what a reload changes."""
 
 from gcsd.config import parse_config
-from gcsd.livechannels import channel_from_spec, plan_reload, restart_sections
+from gcsd.daemon.livechannels import channel_from_spec, plan_reload, restart_sections
 
 
 def channels(text: str):

@@ -10,9 +10,9 @@ import pytest
 from pymavlink import DFReader
 
 from fake_logger_fc import START, STOP, FakeLoggerFC
-from gcsd.logs.capture import ACK, NACK, SEQ_START, Capture, Close, Open, Status, Write
-from gcsd.logs.simlog import FlightRecorder
-from gcsd.sim.state import VehicleState
+from gcsd.payloads.logs.capture import ACK, NACK, SEQ_START, Capture, Close, Open, Status, Write
+from gcsd.payloads.logs.simlog import FlightRecorder
+from gcsd.vehicle.sim.state import VehicleState
 
 ME = (191, 191)
 LOG = 155

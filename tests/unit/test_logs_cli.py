@@ -6,8 +6,8 @@ import json
 
 from logging_fixture import restore_logging  # noqa: F401  (an autouse fixture)
 
-from gcsd.cli import main
-from gcsd.logs.store import LogStore
+from gcsd.daemon.cli import main
+from gcsd.payloads.logs.store import LogStore
 
 
 def write_config(tmp_path, extra: str = "") -> str:

@@ -11,9 +11,9 @@ from pathlib import Path
 import pytest
 from pymavlink import DFReader
 
-from gcsd.logs.dataflash import DataFlashWriter, RecordFormat
-from gcsd.logs.simlog import RATE_HZ, FlightRecorder, gps_time
-from gcsd.sim.state import VehicleState
+from gcsd.payloads.logs.dataflash import DataFlashWriter, RecordFormat
+from gcsd.payloads.logs.simlog import RATE_HZ, FlightRecorder, gps_time
+from gcsd.vehicle.sim.state import VehicleState
 
 WALL = 1_764_000_000.0
 

@@ -8,9 +8,9 @@ import os
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.logs.fastpack import LogData
-from gcsd.logs.store import LogEntry, LogStore
-from gcsd.logs.transfer import Chunk, EntryMsg, LogTransfer
+from gcsd.payloads.logs.fastpack import LogData
+from gcsd.payloads.logs.store import LogEntry, LogStore
+from gcsd.payloads.logs.transfer import Chunk, EntryMsg, LogTransfer
 
 
 def entries(*sizes: int) -> list[LogEntry]:

@@ -8,13 +8,13 @@ import yaml
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.boundary import ErrorCounts
-from gcsd.channel import Channel
 from gcsd.clock import Clock
-from gcsd.codec import Frame
-from gcsd.compose import build_vehicle
 from gcsd.config import parse_config
-from gcsd.logs.capture import SEQ_START
-from gcsd.signing import SigningManager
+from gcsd.daemon.compose import build_vehicle
+from gcsd.links.channel import Channel
+from gcsd.payloads.logs.capture import SEQ_START
+from gcsd.wire.codec import Frame
+from gcsd.wire.signing import SigningManager
 
 
 class Wire:

@@ -11,8 +11,8 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.clock import Clock
 from gcsd.config import parse_config
-from gcsd.config_schema import DEFAULT_STREAM_RATES_HZ, LOCAL_TYPE, MAX_CHANNELS, ChannelConfig, mavlink_slot
-from gcsd.gcs import GCS
+from gcsd.config.schema import DEFAULT_STREAM_RATES_HZ, LOCAL_TYPE, MAX_CHANNELS, ChannelConfig, mavlink_slot
+from gcsd.daemon.daemon import GCS
 
 RAW_IMU = M.MAVLINK_MSG_ID_RAW_IMU  # stream raw_sens
 DEFAULT_RAW_SENS_MS = 1000 // DEFAULT_STREAM_RATES_HZ["raw_sens"]

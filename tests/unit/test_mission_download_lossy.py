@@ -7,9 +7,8 @@ from __future__ import annotations
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.codec import FrameParser
-from gcsd.mission import MissionItem, MissionStore, MissionTransfer, Origin
-from gcsd.mission.download import (
+from gcsd.vehicle.mission import MissionItem, MissionStore, MissionTransfer, Origin
+from gcsd.vehicle.mission.download import (
     COUNT_COPIES,
     ITEM_COPIES,
     LOSSY,
@@ -21,7 +20,8 @@ from gcsd.mission.download import (
     DownloadAssist,
     is_lossy,
 )
-from gcsd.mission.effects import Send
+from gcsd.vehicle.mission.effects import Send
+from gcsd.wire.codec import FrameParser
 
 GCS = Origin(255, 190, "gcs")
 N = 40

@@ -13,7 +13,7 @@ import itertools
 from pymavlink.dialects.v20 import ardupilotmega as M
 from vehicle_harness import Harness
 
-from gcsd.mission import MissionItem
+from gcsd.vehicle.mission import MissionItem
 
 STEP_S = 0.01
 

@@ -8,8 +8,8 @@ from dataclasses import replace
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.mission import FenceStore, MissionItem, MissionStore, RallyStore
-from gcsd.mission.stores import validate
+from gcsd.vehicle.mission import FenceStore, MissionItem, MissionStore, RallyStore
+from gcsd.vehicle.mission.stores import validate
 
 HOME = MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 0, 1, 0, 0, 0, 0,
                    -353632620, 1491652370, 584.0)

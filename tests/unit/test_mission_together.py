@@ -1,12 +1,12 @@
-"""Mission, fence and rally replaced as one, all or none (gcsd.mission.together)."""
+"""Mission, fence and rally replaced as one, all or none (gcsd.vehicle.mission.together)."""
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.mission.effects import Origin, PlanChanged, Text
-from gcsd.mission.items import MissionItem
-from gcsd.mission.stores import FenceStore, MissionStore, RallyStore
-from gcsd.mission.together import write_together
-from gcsd.mission.transfer import MissionTransfer
+from gcsd.vehicle.mission.effects import Origin, PlanChanged, Text
+from gcsd.vehicle.mission.items import MissionItem
+from gcsd.vehicle.mission.stores import FenceStore, MissionStore, RallyStore
+from gcsd.vehicle.mission.together import write_together
+from gcsd.vehicle.mission.transfer import MissionTransfer
 
 HOME = MissionItem(M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, 0, 1, x=-353632621, y=1491652374, z=584.0)
 GCS = Origin(255, 190, "gcs")

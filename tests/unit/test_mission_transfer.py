@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.mission import (
+from gcsd.vehicle.mission import (
     FenceStore,
     MissionItem,
     MissionStore,
@@ -23,7 +23,7 @@ from gcsd.mission import (
     Send,
     Text,
 )
-from gcsd.rtt import RttTable
+from gcsd.vehicle.mission.rtt import RttTable
 
 GCS = Origin(255, 190, "gcs")
 OTHER = Origin(250, 1, "other")  # another ground station

@@ -10,9 +10,9 @@ import pytest
 from pymavlink import mavwp
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.mission import MissionItem
-from gcsd.mission.items import from_item_float, from_item_int, item_float_message, item_int_message
-from gcsd.mission.wpl import WplError, dumps, loads
+from gcsd.vehicle.mission import MissionItem
+from gcsd.vehicle.mission.items import from_item_float, from_item_int, item_float_message, item_int_message
+from gcsd.vehicle.mission.wpl import WplError, dumps, loads
 
 
 def _roundtrip(value: float) -> float:

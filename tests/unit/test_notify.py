@@ -8,7 +8,7 @@ import socket
 
 import pytest
 
-from gcsd.notify import Notifier
+from gcsd.daemon.notify import Notifier
 
 
 @pytest.mark.parametrize(("usec", "interval_s"), [("600000", 0.3), ("10000000", 5.0), ("1", 5e-7)])

@@ -10,8 +10,8 @@ import random
 import yaml
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.channel import MAX_FRAME_BYTES, Channel
 from gcsd.config import parse_config
+from gcsd.links.channel import MAX_FRAME_BYTES, Channel
 
 T0 = 1000.0
 RATE_BPS = 960  # a 9600-baud radio

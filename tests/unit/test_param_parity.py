@@ -27,9 +27,9 @@ from pathlib import Path
 import pytest
 
 from gcsd.config import DEFAULT_STREAM_RATES_HZ
-from gcsd.params import INT8, INT16, INT32, REAL32, ParamStore, SetResult, parameter_set
-from gcsd.streams import PARAM_SUFFIX
-from gcsd.vehicles import VEHICLE_TYPES, vehicle_params
+from gcsd.vehicle.params import INT8, INT16, INT32, REAL32, ParamStore, SetResult, parameter_set
+from gcsd.vehicle.types import VEHICLE_TYPES, vehicle_params
+from gcsd.wire.streams import PARAM_SUFFIX
 
 CAPTURES = Path(__file__).resolve().parents[1] / "integration" / "data" / "ardupilot"  # copies of the captures
 TYPES = {"INT8": INT8, "INT16": INT16, "INT32": INT32, "REAL32": REAL32}

@@ -9,7 +9,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 from vehicle_harness import Harness
 
-from gcsd.params.store import TYPE_RANGE
+from gcsd.vehicle.params.store import TYPE_RANGE
 
 VEHICLES = ["copter", "plane", "rover", "sub", "tracker", "blimp", "companion"]
 SKIP = {

@@ -11,11 +11,17 @@ from types import SimpleNamespace
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-import gcsd.services.params as params_module
-from gcsd.params import INT16, REAL32, ParamDef, ParamStore
-from gcsd.params.parmfile import parse_parm
-from gcsd.services import Incoming
-from gcsd.services.params import BURST, BURST_INTERVAL_S, PARAM_VALUE_BYTES, PERSIST_INTERVAL_S, ParamService
+import gcsd.vehicle.services.params as params_module
+from gcsd.vehicle.params import INT16, REAL32, ParamDef, ParamStore
+from gcsd.vehicle.params.parmfile import parse_parm
+from gcsd.vehicle.services import Incoming
+from gcsd.vehicle.services.params import (
+    BURST,
+    BURST_INTERVAL_S,
+    PARAM_VALUE_BYTES,
+    PERSIST_INTERVAL_S,
+    ParamService,
+)
 
 GCS = (255, 190)
 

@@ -5,8 +5,8 @@ import struct
 
 import pytest
 
-from gcsd.params import INT8, INT16, INT32, REAL32, ParamDef, ParamStore, SetResult, as_float, to_type
-from gcsd.params.parmfile import format_parm, format_real32, parse_parm
+from gcsd.vehicle.params import INT8, INT16, INT32, REAL32, ParamDef, ParamStore, SetResult, as_float, to_type
+from gcsd.vehicle.params.parmfile import format_parm, format_real32, parse_parm
 
 
 def store():

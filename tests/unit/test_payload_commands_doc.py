@@ -8,9 +8,9 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.camera.service import CameraService
-from gcsd.can.service import CanService
-from gcsd.gimbal.service import GimbalService
+from gcsd.payloads.camera.service import CameraService
+from gcsd.payloads.can.service import CanService
+from gcsd.payloads.gimbal.service import GimbalService
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "commands.md"
 NAMES = {v: k for k, v in vars(M).items() if k.startswith("MAV_CMD_") and isinstance(v, int)}

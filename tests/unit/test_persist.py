@@ -20,10 +20,10 @@ import pytest
 from test_params_service import FakeChannel, FakeContext, defs, param_set
 
 from gcsd.atomic import write_atomic
-from gcsd.params import ParamStore
-from gcsd.params.parmfile import read_parm
 from gcsd.persist import WriteBehind
-from gcsd.services.params import ParamService
+from gcsd.vehicle.params import ParamStore
+from gcsd.vehicle.params.parmfile import read_parm
+from gcsd.vehicle.services.params import ParamService
 
 HOLD_WAIT_S = 5.0  # the longest real wait for a worker; a stuck test then fails instead of hanging
 

@@ -10,7 +10,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from vehicle_harness import GCS, Harness
 
 from gcsd.atomic import write_atomic
-from gcsd.mission import wpl
+from gcsd.vehicle.mission import wpl
 
 WP = M.MAV_CMD_NAV_WAYPOINT
 REL = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT

@@ -8,9 +8,9 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 from vehicle_harness import Harness
 
-from gcsd.mission import MissionItem
-from gcsd.sim.geo import offset
-from gcsd.vehicles.prearm import PrearmDisplay
+from gcsd.vehicle.mission import MissionItem
+from gcsd.vehicle.sim.geo import offset
+from gcsd.vehicle.types.prearm import PrearmDisplay
 
 FAILED, ACCEPTED = M.MAV_RESULT_FAILED, M.MAV_RESULT_ACCEPTED
 

@@ -1,4 +1,4 @@
-"""RC parameters act as in ArduPilot (gcsd.vehicles.rc): each test changes a parameter and
+"""RC parameters act as in ArduPilot (gcsd.vehicle.types.rc): each test changes a parameter and
 watches the vehicle: the flight-mode switch (FLTMODE_CH, FLTMODE1..6 with ArduPilot's PWM
 bands, 200 ms debounce), stick mapping (RCMAP_*), calibration (RCn_TRIM/_DZ/_MIN/_MAX/
 _REVERSED) and the RC failsafe (FS_THR_ENABLE / FS_THR_VALUE) when overrides lapse."""
@@ -10,7 +10,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from test_autopilot import flying
 from vehicle_harness import Harness
 
-from gcsd.vehicles.rc import scaled, switch_position
+from gcsd.vehicle.types.rc import scaled, switch_position
 
 IGNORE = 65535
 
@@ -257,7 +257,7 @@ def test_land_descends_at_land_speed_high_above_land_alt_low(tmp_path):
 
 
 def _fly_east(h: Harness) -> float:
-    from gcsd.sim.geo import offset
+    from gcsd.vehicle.sim.geo import offset
     s = h.state
     lat, lon = offset(s.lat, s.lon, 0.0, 80.0)
     h.node.autopilot.goto(lat, lon, s.alt_amsl_m)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from gcsd.router import ChannelPolicy, Decision, Router, RouteTable
+from gcsd.routing.router import ChannelPolicy, Decision, Router, RouteTable
 
 HB, CMD, RADIO_STATUS, PARAM_SET = 0, 76, 109, 23
 GCS1, GCS2, CAM, OTHER = (255, 190), (254, 190), (1, 100), (7, 1)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from gcsd.rtt import GRANULARITY_S, INITIAL_RTO_S, MIN_RTO_S, RttEstimator, RttTable
+from gcsd.vehicle.mission.rtt import GRANULARITY_S, INITIAL_RTO_S, MIN_RTO_S, RttEstimator, RttTable
 
 
 def test_before_any_sample_the_timeout_is_the_initial_value():

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from gcsd.scheduler import MIN_INTERVAL_MS, NUM_BUCKETS, SERVICE_SHARE, SendScheduler, ServiceShare
+from gcsd.links.scheduler import MIN_INTERVAL_MS, NUM_BUCKETS, SERVICE_SHARE, SendScheduler, ServiceShare
 
 HB = 0
 

@@ -12,8 +12,8 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 from vehicle_harness import Harness
 
-from gcsd.ftp.protocol import Nak, Op, Payload
-from gcsd.scheduler import SERVICE_SHARE
+from gcsd.links.scheduler import SERVICE_SHARE
+from gcsd.vehicle.ftp.protocol import Nak, Op, Payload
 
 BAUD = 9600
 BUDGET_BPS = BAUD // 10

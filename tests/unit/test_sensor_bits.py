@@ -1,4 +1,4 @@
-"""SYS_STATUS sensor bits (gcsd.vehicles.health) against ArduPilot SITL's, and driven by real state.
+"""SYS_STATUS sensor bits (gcsd.vehicle.types.health) against ArduPilot SITL's, and driven by real state.
 
 The probe bits are ArduPilot's once its pre-arm checks passed (`sys_status_when_ready`); the two
 documented settling differences (ArduPlane's TERRAIN and Rover's AHRS were still unhealthy 19 s

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.services.serialcontrol import CHUNK, SerialPassthrough
+from gcsd.vehicle.services.serialcontrol import CHUNK, SerialPassthrough
 
 RESPOND = M.SERIAL_CONTROL_FLAG_RESPOND
 GPS1, GPS2 = M.SERIAL_CONTROL_DEV_GPS1, M.SERIAL_CONTROL_DEV_GPS2

@@ -5,8 +5,8 @@ import pytest
 from pymavlink.dialects.v10 import ardupilotmega as V1
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.signgate import signed_copy
-from gcsd.signing import Signing, wall_to_units
+from gcsd.routing.signgate import signed_copy
+from gcsd.wire.signing import Signing, wall_to_units
 
 KEY = bytes(range(32))
 WALL_S = 1_800_000_000.0

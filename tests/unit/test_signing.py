@@ -4,7 +4,7 @@ import os
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.signing import (
+from gcsd.wire.signing import (
     BAD_SIGNATURE,
     FUTURE,
     FUTURE_LIMIT_S,

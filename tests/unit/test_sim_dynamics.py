@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from gcsd.sim import (
+from gcsd.vehicle.sim import (
     BlimpDynamics,
     Environment,
     FixedWingDynamics,
@@ -22,7 +22,7 @@ from gcsd.sim import (
     TrackerDynamics,
     VehicleState,
 )
-from gcsd.sim.geo import bearing_deg, distance_m, offset, wrap_180
+from gcsd.vehicle.sim.geo import bearing_deg, distance_m, offset, wrap_180
 
 HOME = (-35.363262, 149.165237, 584.0)
 DT = 0.05

@@ -1,4 +1,4 @@
-"""The compiled fast path (gcsd._speedups) against the Python it stands in for (gcsd.speedups).
+"""The compiled fast path (gcsd.wire._speedups) against the Python it stands in for (gcsd.wire.speedups).
 
 - feed: random streams of good, signed, MAVLink1, unknown-id, bad-CRC and bad-flag frames with
   garbage between them, cut into random chunks, through both parsers: the same frames (every
@@ -23,10 +23,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd import codec, dedup, speedups
-from gcsd.codec import Encoder, FrameParser
+from gcsd.routing import dedup
+from gcsd.wire import codec, speedups
+from gcsd.wire.codec import Encoder, FrameParser
 
-needs_c = pytest.mark.skipif(speedups.compiled is None, reason="gcsd._speedups is not built")
+needs_c = pytest.mark.skipif(speedups.compiled is None, reason="gcsd.wire._speedups is not built")
 SLOTS = [s for s in codec.Frame.__slots__ if s != "_msg"]
 
 
@@ -34,7 +35,7 @@ def test_the_compiled_module_is_built_in_ci():
     """CI installs a C compiler and sets GCSD_REQUIRE_SPEEDUPS (.ci/run), so the compiled path is
     what its tests exercise."""
     if os.environ.get("GCSD_REQUIRE_SPEEDUPS") and not os.environ.get("GCSD_PURE_PYTHON"):
-        assert speedups.IMPLEMENTATION == "c", "gcsd._speedups was not built: is gcc installed?"
+        assert speedups.IMPLEMENTATION == "c", "gcsd.wire._speedups was not built: is gcc installed?"
         assert codec._feed is speedups.compiled.feed
 
 

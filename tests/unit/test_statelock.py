@@ -6,7 +6,7 @@ import os
 
 import pytest
 
-from gcsd.statelock import LOCK_NAME, StateDirBusy, acquire
+from gcsd.daemon.statelock import LOCK_NAME, StateDirBusy, acquire
 
 
 def test_a_second_holder_is_refused_with_the_first_ones_pid_until_it_releases(tmp_path):

@@ -2,7 +2,7 @@
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from gcsd.services.statustext import QUEUE_LEN, StatusTextQueue, chunk_text
+from gcsd.vehicle.services.statustext import QUEUE_LEN, StatusTextQueue, chunk_text
 
 INFO = M.MAV_SEVERITY_INFO
 

@@ -1,6 +1,6 @@
 """request_streams: which autopilots are asked for their streams, and when (fake clock)."""
 
-from gcsd.streamreq import SILENCE_S, StreamRequests
+from gcsd.routing.streamreq import SILENCE_S, StreamRequests
 
 QUAD, ARDUPILOT, GCS, INVALID = 2, 3, 6, 8
 

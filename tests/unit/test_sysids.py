@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from gcsd.params.sysids import clash, start_sysids
+from gcsd.vehicle.params.sysids import clash, start_sysids
 
 
 def test_saved_sysids_that_are_distinct_are_kept_a_swap_included():

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from test_channel_admission import heartbeat, make_channel
 
-from gcsd.unauth import UNAUTHENTICATED_TIMEOUT_S, evictee, expired, waiting_slots
+from gcsd.links.unauth import UNAUTHENTICATED_TIMEOUT_S, evictee, expired, waiting_slots
 
 
 class Conn:
@@ -121,7 +121,7 @@ def test_accept_out_of_descriptors_pauses_counts_and_logs_once_then_accepts_agai
 
     from structlog.testing import capture_logs
 
-    from gcsd.tcpserver import Listener, listen
+    from gcsd.links.tcpserver import Listener, listen
 
     class OutOfDescriptors:
         """The real listening socket, whose accept() fails with EMFILE while `failing`."""
@@ -174,7 +174,7 @@ def test_a_tcp_server_listens_on_ipv4_ipv6_and_names():
     import asyncio
     import socket
 
-    from gcsd.tcpserver import listen
+    from gcsd.links.tcpserver import listen
 
     hosts = {"127.0.0.1": socket.AF_INET, "localhost": socket.AF_INET}
     try:  # only where the machine has IPv6 loopback (some containers do not)
@@ -209,7 +209,7 @@ def test_the_descriptor_budget_counts_every_tcp_connection_a_channel_can_hold_an
     import resource
 
     from gcsd.config import parse_config
-    from gcsd.tcpserver import FD_RESERVE, descriptors_needed, ensure_descriptor_budget
+    from gcsd.links.tcpserver import FD_RESERVE, descriptors_needed, ensure_descriptor_budget
 
     config = parse_config("channels:\n"
                           "  - {name: a, type: tcp-server, address: '127.0.0.1:0', max_peers: 64}\n"

@@ -3,7 +3,7 @@
 import pytest
 from pymavlink import mavutil
 
-from gcsd.vehicles.modes import mode_mapping
+from gcsd.vehicle.types.modes import mode_mapping
 
 
 @pytest.mark.parametrize("name", ["apm", "acm", "rover", "tracker", "sub", "blimp"])

@@ -6,8 +6,8 @@ from __future__ import annotations
 import pytest
 from pymavlink import mavutil
 
-from gcsd.params import parameter_set
-from gcsd.vehicles import VEHICLE_TYPES
+from gcsd.vehicle.params import parameter_set
+from gcsd.vehicle.types import VEHICLE_TYPES
 
 READ_ELSEWHERE = {  # parameter -> where it acts, when not through Settings
     "FENCE_ENABLE": "autopilot.fence", "FENCE_TYPE": "autopilot.fence", "FENCE_ALT_MAX": "autopilot.fence",

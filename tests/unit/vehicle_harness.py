@@ -16,12 +16,12 @@ import yaml
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.boundary import ErrorCounts
-from gcsd.channel import Channel
 from gcsd.clock import Clock
-from gcsd.codec import Frame
-from gcsd.compose import build_vehicle
 from gcsd.config import parse_config
-from gcsd.signing import SigningManager
+from gcsd.daemon.compose import build_vehicle
+from gcsd.links.channel import Channel
+from gcsd.wire.codec import Frame
+from gcsd.wire.signing import SigningManager
 
 GCS = (255, 190)
 
