@@ -1,7 +1,8 @@
 """A small blocking HTTP client for the API tests (urllib), and WebSocket sessions (aiohttp).
 
 `call(url, method, body)` returns (status, headers, parsed JSON or text, raw text); it never
-raises for an HTTP error status. `ws_frames(url, count)` reads text frames from a WebSocket.
+raises for an HTTP error status. A POST or PUT says `Content-Type: application/json` unless
+`headers` says otherwise (what a JSON client sends; urllib's own default is a form). `ws_frames(url, count)` reads text frames from a WebSocket.
 """
 
 from __future__ import annotations
@@ -18,7 +19,10 @@ import aiohttp
 def call(url: str, method: str = "GET", body: object = None, headers: dict | None = None,
          raw: bytes | None = None, timeout: float = 5.0):
     data = raw if raw is not None else (None if body is None else json.dumps(body).encode())
-    request = urllib.request.Request(url, data=data, method=method, headers=headers or {})
+    headers = dict(headers or {})
+    if data is not None or method in ("POST", "PUT"):  # what a JSON client says (urllib's default is a form)
+        headers.setdefault("Content-Type", "application/json")
+    request = urllib.request.Request(url, data=data, method=method, headers=headers)
     try:
         with urllib.request.urlopen(request, timeout=timeout) as response:
             status, hdrs, text = response.status, response.headers, response.read().decode("utf-8", "replace")

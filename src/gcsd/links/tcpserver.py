@@ -9,8 +9,9 @@ is counted (`accept_failures`, `gcsd status`); the log says so at most once per
 ACCEPT_LOG_INTERVAL_S per channel, with the count since the last line, never a traceback per
 attempt. A connection reset before it was accepted (ECONNABORTED) is skipped.
 
-Descriptor budget: a tcp-server channel holds at most max_peers + 1 connections (unauth.py),
-so the process needs at most `descriptors_needed(channels)`: those, plus FD_RESERVE for
+Descriptor budget: a tcp-server channel holds at most max_peers + 1 connections (unauth.py)
+and the HTTP API at most its MAX_CONNECTIONS (gcsd.api.http.service), so the process needs at
+most `descriptors_needed(channels, http_connections)`: those and their listeners, plus FD_RESERVE for
 everything else (the control socket and the connections `gcsd status` makes, state files,
 UDP, serial and MQTT sockets, log and tlog files, worker threads' wake-up pipes).
 `ensure_descriptor_budget` raises the soft RLIMIT_NOFILE to that when it is lower (up to the
@@ -128,8 +129,11 @@ async def listen(host: str, port: int) -> socket.socket:
     return sock
 
 
-def descriptors_needed(channels: Iterable) -> int:
-    return FD_RESERVE + sum(c.max_peers + 1 for c in channels if c.type == "tcp-server")
+def descriptors_needed(channels: Iterable, http_connections: int = 0) -> int:
+    """FD_RESERVE, each tcp-server channel's connections and listener, and the HTTP API's
+    (`http_connections` at most, and its listener: gcsd.api.http.service.HttpService.attach)."""
+    http = http_connections + 1 if http_connections else 0
+    return FD_RESERVE + http + sum(c.max_peers + 1 for c in channels if c.type == "tcp-server")
 
 
 def ensure_descriptor_budget(needed: int) -> tuple[int, int]:

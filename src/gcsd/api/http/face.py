@@ -103,7 +103,7 @@ class Face:
         return [{k: v for k, v in e.items() if k != "path"} for e in self._list_logs()]
 
     def log_file(self, log_id: str, sysid: int | None = None) -> Path | None:
-        if not log_id.isdigit():
+        if not (log_id.isascii() and log_id.isdigit()):
             return None
         for e in self._list_logs():
             if e["id"] == int(log_id) and (sysid is None or e["sysid"] == sysid):

@@ -20,14 +20,20 @@ Routes (each mavlink2rest route is also served without `/v1`, as mavlink2rest do
   GET  /v1/logs, /v1/logs/{id}[?sysid=S]   the flight logs (gcsd.payloads.logs.listing), one log's file
   GET  /, /favicon.ico             the status page (gcsd.api.http.statuspage)
 
-Errors are JSON `{"error": "..."}`: 400 malformed JSON or a bad message, 404 an unknown route,
+Errors are JSON `{"error": "..."}`: 400 malformed JSON (nested deeper than MAX_JSON_DEPTH
+included: checked before parsing), a bad message, or an id in a path that is not ASCII digits,
+404 an unknown route,
 path, message name, vehicle or parameter, 405 a wrong method, 413 a body over MAX_BODY_BYTES,
 422 a value of the wrong type or range, an unknown mode or a bad plan (nothing of it stored), 409
-a command the vehicle refused or a plan while a ground station uploads that type, 503 beyond
-MAX_WEBSOCKETS WebSocket clients, 504 no answer from a vehicle. An exception in a handler is
+a command the vehicle refused or a plan while a ground station uploads that type, 408 a body
+not received within BODY_TIMEOUT_S, 503 beyond MAX_WEBSOCKETS WebSocket clients, 504 no answer
+from a vehicle. Nothing a client sends is a daemon error: only an exception in a handler is
 counted (`http` in the daemon's error counts) and answered 500; the daemon goes on. With
 `http.token_file`, every request but the favicon needs `Authorization: Bearer TOKEN` or
-`?token=TOKEN` (a browser's WebSocket cannot set headers); without it: 401 with `WWW-Authenticate: Bearer`. CORS is permissive, as mavlink2rest's.
+`?token=TOKEN` (a browser's WebSocket cannot set headers); without it: 401 with `WWW-Authenticate: Bearer`.
+Before any handler, gcsd.api.http.guard decides whether a request may change state (Host,
+Origin, Content-Type, read-only) and which CORS headers it gets. The WebSocket answers a bad
+message with `{"error"}` and stays open.
 """
 
 from __future__ import annotations
@@ -37,18 +43,23 @@ import hmac
 import json
 import math
 import re
+from itertools import accumulate
 from typing import Protocol
 
 from aiohttp import WSMsgType, web
 
 from gcsd.api.http import statuspage
+from gcsd.api.http.guard import READ_ONLY_TEXT, Guard
 from gcsd.api.http.hub import Hub
-from gcsd.api.http.mavjson import BadMessage, UnknownMessage, parse_envelope, template
+from gcsd.api.http.mavjson import FLOAT32_MAX, BadMessage, UnknownMessage, parse_envelope, template
 from gcsd.api.http.plan import PlanError
 from gcsd.api.http.tree import MessageTree
 
 MAX_BODY_BYTES = 1 << 20
+MAX_JSON_DEPTH = 64  # a .plan nests 8 deep; Python's parser recurses (RecursionError near 1 000)
+BODY_TIMEOUT_S = 5.0
 API = web.AppKey("api", object)
+GUARD = web.AppKey("guard", Guard)
 MAX_WEBSOCKETS = 64  # a client opening more gets 503: the daemon's work stays bounded
 API_VERSION = 0
 
@@ -103,17 +114,52 @@ def _reject_constant(name: str) -> None:
     raise ValueError(f"{name} is not JSON")
 
 
-async def read_json(request: web.Request) -> object:
-    body = await request.read()  # 413 over client_max_size
+_STRING = re.compile(rb'"(?:[^"\\]++|\\.)*+"', re.DOTALL)
+_NOT_BRACKETS = bytes(b for b in range(256) if b not in b"[]{}")
+_STEP = [0] * 256
+_STEP[ord("[")] = _STEP[ord("{")] = 1
+_STEP[ord("]")] = _STEP[ord("}")] = -1
+
+
+def json_depth(data: bytes) -> int:
+    """How deep the arrays and objects of a JSON text nest, without parsing it (strings skipped)."""
+    brackets = _STRING.sub(b"", data).translate(None, _NOT_BRACKETS)
+    return max(accumulate(_STEP[b] for b in brackets), default=0)
+
+
+def parse_json(data: bytes | str) -> object:
+    """A client's JSON text, bounded before parsing: RequestFailed(400) for malformed or too deep."""
+    if isinstance(data, str):
+        data = data.encode("utf-8", "surrogatepass")
+    if len(data) > MAX_BODY_BYTES:
+        raise RequestFailed(413, f"body over {MAX_BODY_BYTES} bytes")
+    if json_depth(data) > MAX_JSON_DEPTH:
+        raise RequestFailed(400, f"malformed JSON: nested deeper than {MAX_JSON_DEPTH}")
     try:
-        return json.loads(body, parse_constant=_reject_constant)
-    except (ValueError, UnicodeDecodeError) as exc:
+        return json.loads(data, parse_constant=_reject_constant)
+    except (ValueError, UnicodeDecodeError, RecursionError) as exc:
         raise RequestFailed(400, f"malformed JSON: {exc}") from None
 
 
-def build_app(api: Api, token: str | None = None) -> web.Application:
-    app = web.Application(client_max_size=MAX_BODY_BYTES, middlewares=[_errors(api), _auth(token), _cors])
+async def read_json(request: web.Request) -> object:
+    try:
+        body = await asyncio.wait_for(request.read(), BODY_TIMEOUT_S)  # 413 over client_max_size
+    except TimeoutError:
+        request.app[GUARD].count("body_timeout")
+        raise RequestFailed(408, f"the body did not arrive within {BODY_TIMEOUT_S:g} s") from None
+    return parse_json(body)
+
+
+def ascii_id(text: str) -> int | None:
+    """A decimal id from a path or a query (ASCII digits only: "²" passes str.isdigit())."""
+    return int(text) if text.isascii() and text.isdigit() and len(text) <= 10 else None
+
+
+def build_app(api: Api, token: str | None = None, guard: Guard | None = None) -> web.Application:
+    guard = guard or Guard(lambda: None, token=token is not None)
+    app = web.Application(client_max_size=MAX_BODY_BYTES, middlewares=[_errors(api), _gate(token, guard)])
     app[API] = api
+    app[GUARD] = guard
     r = app.router
     for prefix in ("/v1", ""):
         r.add_get(prefix + "/mavlink", mavlink_get)
@@ -158,34 +204,37 @@ def _errors(api: Api):
     return middleware
 
 
-def _auth(token: str | None):
+def _gate(token: str | None, guard: Guard):
+    """The token (401), then the guard (421, 403, 415), then the handler; CORS on the answer."""
     expected = token.encode() if token else None
 
     @web.middleware
     async def middleware(request: web.Request, handler):
-        if expected is None or request.path == "/favicon.ico" or request.method == "OPTIONS":
-            return await handler(request)
-        given = request.query.get("token", "")
-        header = request.headers.get("Authorization", "")
-        if header.startswith("Bearer "):
-            given = header[7:].strip()
-        if not hmac.compare_digest(given.encode(), expected):
-            return error(401, "a bearer token is required", {"WWW-Authenticate": 'Bearer realm="gcsd"'})
-        return await handler(request)
+        token_ok = False
+        if expected is not None:
+            given = request.query.get("token", "")
+            header = request.headers.get("Authorization", "")
+            if header.startswith("Bearer "):
+                given = header[7:].strip()
+            token_ok = hmac.compare_digest(given.encode(), expected)
+            if not token_ok and request.path != "/favicon.ico" and request.method != "OPTIONS":
+                return error(401, "a bearer token is required", {"WWW-Authenticate": 'Bearer realm="gcsd"'})
+        # a 404 or a 405 changes nothing; a preflight has no route of its own
+        routed = request.match_info.http_exception is None or request.method == "OPTIONS"
+        refusal = guard.check(request.method, request.headers, token_ok) if routed else None
+        if refusal is not None:
+            return error(refusal.status, refusal.text)
+        if request.method == "OPTIONS":
+            response = web.Response(status=204)
+            response.headers["Access-Control-Allow-Methods"] = "GET, POST, PUT, OPTIONS"
+            response.headers["Access-Control-Allow-Headers"] = "Authorization, Content-Type"
+        else:
+            response = await handler(request)
+        if not response.prepared:  # a WebSocket or a file already sent its headers
+            response.headers.update(guard.cors(request.method, request.headers,
+                                               request.headers.get("Access-Control-Request-Method")))
+        return response
     return middleware
-
-
-@web.middleware
-async def _cors(request: web.Request, handler):
-    if request.method == "OPTIONS":
-        response = web.Response(status=204)
-    else:
-        response = await handler(request)
-    response.headers["Access-Control-Allow-Origin"] = "*"
-    if request.method == "OPTIONS":
-        response.headers["Access-Control-Allow-Methods"] = "GET, POST, PUT, OPTIONS"
-        response.headers["Access-Control-Allow-Headers"] = "Authorization, Content-Type"
-    return response
 
 
 # --- mavlink2rest ----------------------------------------------------------------------------
@@ -232,6 +281,7 @@ async def info(request: web.Request) -> web.Response:
 
 async def websocket(request: web.Request) -> web.StreamResponse:
     api: Api = request.app[API]
+    guard = request.app[GUARD]
     if len(api.hub.subscribers) >= MAX_WEBSOCKETS:
         raise RequestFailed(503, f"{MAX_WEBSOCKETS} WebSocket clients already; try again later")
     try:
@@ -247,12 +297,12 @@ async def websocket(request: web.Request) -> web.StreamResponse:
                 if frame.type not in (WSMsgType.TEXT, WSMsgType.BINARY):
                     continue
                 try:
-                    data = frame.data if frame.type == WSMsgType.TEXT else frame.data.decode()
-                    _send(api, json.loads(data, parse_constant=_reject_constant))
+                    if guard.read_only:
+                        guard.count("read_only")
+                        raise RequestFailed(403, READ_ONLY_TEXT)
+                    _send(api, parse_json(frame.data))
                 except RequestFailed as exc:
                     await ws.send_str(json.dumps({"error": str(exc)}))
-                except (ValueError, UnicodeDecodeError) as exc:
-                    await ws.send_str(json.dumps({"error": f"malformed JSON: {exc}"}))
         finally:
             sender.cancel()
     finally:
@@ -277,7 +327,8 @@ async def status(request: web.Request) -> web.Response:
 
 def _vehicle(request: web.Request) -> Vehicle:
     text = request.match_info["sysid"]
-    vehicle = request.app[API].vehicle(int(text)) if text.isdigit() else None
+    sysid = ascii_id(text)
+    vehicle = request.app[API].vehicle(sysid) if sysid is not None else None
     if vehicle is None:
         raise RequestFailed(404, f"no vehicle with sysid {text}")
     return vehicle
@@ -302,8 +353,9 @@ async def parameter_put(request: web.Request) -> web.Response:
         raise RequestFailed(404, f"no parameter {name}")
     body = await read_json(request)
     value = body.get("value") if isinstance(body, dict) else None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise RequestFailed(422, 'expected {"value": a finite number}')
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or abs(value) > FLOAT32_MAX \
+            or not math.isfinite(value):  # PARAM_SET carries a float32, whatever the parameter's type
+        raise RequestFailed(422, 'expected {"value": a finite number within float32 range}')
     return _json(await vehicle.set_parameter(name, float(value)))
 
 
@@ -355,8 +407,7 @@ async def logs(request: web.Request) -> web.Response:
 
 
 async def log_file(request: web.Request) -> web.StreamResponse:
-    sysid = request.query.get("sysid", "")
-    path = request.app[API].log_file(request.match_info["id"], int(sysid) if sysid.isdigit() else None)
+    path = request.app[API].log_file(request.match_info["id"], ascii_id(request.query.get("sysid", "")))
     if path is None:
         raise RequestFailed(404, f"no log {request.match_info['id']}")
     return web.FileResponse(path, headers={"Content-Type": "application/octet-stream"})

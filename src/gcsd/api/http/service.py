@@ -12,6 +12,19 @@ A port another process holds (a second gcsd on the host: a swarm, a fleet instan
 test) costs only the API: the transport tries again with its backoff (logged once per distinct
 error), `state()` says why it is not listening (`gcsd status`, systemd's READY status line), and
 neither READY nor the MAVLink channels wait for it.
+
+Connections are bounded, inside the daemon's descriptor budget (`attach` raises it by
+MAX_CONNECTIONS + 1 for the API, gcsd.links.tcpserver): at most MAX_CONNECTIONS at once. One
+beyond closes the oldest connection that has not yet sent a whole request head (an idle or a
+slow one: counted in `refused["idle_replaced"]`), so a client that asks is served whatever sits
+idle; when every connection is busy with a request, the new one is answered 503 and closed at
+once (`refused["connections"]`). At most ACCEPT_BATCH connections are accepted per wake-up,
+so a burst holds few descriptors beyond the cap before they are closed. A connection
+must deliver a whole request head within KEEPALIVE_S of being opened or of its last answer, and
+an idle keep-alive connection is closed after KEEPALIVE_S (aiohttp's keep-alive timer runs from
+the connection's start and cuts a connection still waiting for a head: slowloris included); a
+body must arrive within routes.BODY_TIMEOUT_S (408). With `signing.require` and no token the API
+is read-only (gcsd.api.http.guard), said once in the log when it starts listening.
 """
 
 from __future__ import annotations
@@ -23,15 +36,23 @@ import structlog
 from aiohttp import web
 
 from gcsd.api.http.face import Face
+from gcsd.api.http.guard import Guard
 from gcsd.api.http.local import LocalChannel
 from gcsd.api.http.routes import build_app
 from gcsd.config import Config
 from gcsd.config.http import read_token
+from gcsd.links import tcpserver
 from gcsd.payloads.logs.listing import list_logs
 
 log = structlog.get_logger("gcsd.api.http")
 
 SHUTDOWN_TIMEOUT_S = 1.0
+MAX_CONNECTIONS = 64 + 8  # clients, and the status page's two WebSockets and its fetches
+KEEPALIVE_S = 5.0
+ACCEPT_BATCH = 16  # asyncio accepts up to `backlog` connections per wake-up
+HEAD_END = b"\r\n\r\n"
+_REFUSED = (b"HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\nConnection: close\r\n"
+            b"Content-Length: %d\r\n\r\n%s")
 
 
 class HttpService:
@@ -45,6 +66,11 @@ class HttpService:
         self._channels = gcs.channels  # the daemon's live list (channels come and go at run time)
         self._errors = gcs.errors
         self._now = gcs.clock.now
+        self._server: asyncio.AbstractServer | None = None
+        self._open: dict[_Counted, None] = {}  # the connections open now, oldest first
+        self.read_only = config.signing.require and config.http.token_file is None
+        self.guard = Guard(lambda: self.address, self.read_only, config.http.token_file is not None)
+        self._said_read_only = False
         self.face = Face(channel, gcs.nodes, self.status, gcs.errors, gcs.clock.now, gcs.clock.wall,
                          functools.partial(list_logs, config))
 
@@ -56,6 +82,11 @@ class HttpService:
             return None
         service = cls(gcs.config, channel, gcs)
         channel.opener = service.open
+        # the daemon's descriptor budget with the API's share (gcsd.links.tcpserver): raised if short
+        limit, needed = tcpserver.ensure_descriptor_budget(
+            tcpserver.descriptors_needed(gcs.config.channels, MAX_CONNECTIONS))
+        if limit < needed:
+            log.warning("descriptor_budget_short", limit=limit, needed=needed, http_connections=MAX_CONNECTIONS)
         return service
 
     def status(self) -> dict:
@@ -72,7 +103,9 @@ class HttpService:
         host, port = self.config.http.address
         return {"address": f"{host}:{port}",
                 "listening": None if self.address is None else f"{self.address[0]}:{self.address[1]}",
-                "error": None if self.address is not None else self.listen_error}
+                "error": None if self.address is not None else self.listen_error,
+                "read_only": self.read_only, "connections": len(self._open),
+                "max_connections": MAX_CONNECTIONS, "refused": dict(sorted(self.guard.refused.items()))}
 
     def tap(self, channel, frame, now: float) -> None:
         """The daemon's tap (compose.py): every accepted frame, before routing, at the wall time
@@ -87,31 +120,109 @@ class HttpService:
         http = self.config.http
         if self._runner is None:
             token = read_token(http.token_file) if http.token_file else None
-            self._runner = web.AppRunner(build_app(self.face, token), access_log=None, handle_signals=False,
-                                         shutdown_timeout=SHUTDOWN_TIMEOUT_S)
+            self._runner = web.AppRunner(build_app(self.face, token, self.guard), access_log=None,
+                                         handle_signals=False, shutdown_timeout=SHUTDOWN_TIMEOUT_S,
+                                         keepalive_timeout=KEEPALIVE_S)
             await self._runner.setup()
         runner = self._runner
         host, port = http.address
         try:
-            await web.TCPSite(runner, host, port).start()
+            server = await asyncio.get_running_loop().create_server(
+                functools.partial(self._connection, runner), host, port, reuse_address=True, backlog=ACCEPT_BATCH)
         except OSError as exc:
             self.listen_error = exc.strerror or str(exc)
             self._runner = None
             await runner.cleanup()
             raise
+        self._server = server
         self.listen_error = None
-        self.address = tuple(runner.addresses[0][:2]) if runner.addresses else (host, port)
+        self.address = tuple(server.sockets[0].getsockname()[:2]) if server.sockets else (host, port)
         self.face.channel.local_address = self.address
         log.info("http_listening", address=f"{self.address[0]}:{self.address[1]}",
-                 token=http.token_file is not None)
+                 token=http.token_file is not None, max_connections=MAX_CONNECTIONS)
+        if self.read_only and not self._said_read_only:
+            self._said_read_only = True
+            log.warning("http_read_only", reason="signing.require is true and http.token_file is not set: "
+                        "POST, PUT and WebSocket sends are refused (403); set http.token_file to allow them")
 
         def close() -> None:
             self.address = None
+            server.close()
             if self._runner is runner:
                 self._runner = None
             self._closing.add(asyncio.ensure_future(runner.cleanup()))
 
         return close, asyncio.get_running_loop().create_future()
+
+    def _connection(self, runner: web.AppRunner) -> asyncio.Protocol:
+        """The protocol of an accepted connection: aiohttp's, counted; at the cap the oldest that
+        has sent no request head yet makes room, or else a 503."""
+        if len(self._open) >= MAX_CONNECTIONS:
+            waiting = next((c for c in self._open if not c.head_seen and c.connected), None)
+            if waiting is None or runner.server is None:
+                self.guard.count("connections")
+                return _Refused()
+            self.guard.count("idle_replaced")
+            self._open.pop(waiting)
+            waiting.abort()
+        if runner.server is None:
+            return _Refused()
+        conn = _Counted(runner.server(), self._open)
+        self._open[conn] = None
+        return conn
+
+
+class _Counted(asyncio.Protocol):
+    """aiohttp's protocol for one connection, in the table of open ones until it is gone; whether
+    its first request head has arrived (an older one that has not is the first to make room)."""
+
+    def __init__(self, inner, table: dict) -> None:
+        self.inner, self._table = inner, table
+        self.head_seen = False
+        self._tail = b""
+        self._transport = None
+
+    @property
+    def connected(self) -> bool:
+        return self._transport is not None
+
+    def abort(self) -> None:
+        if self._transport is not None:
+            self._transport.abort()
+
+    def connection_made(self, transport) -> None:
+        self._transport = transport
+        self.inner.connection_made(transport)
+
+    def data_received(self, data: bytes) -> None:
+        if not self.head_seen:
+            seen = self._tail + data
+            self.head_seen = HEAD_END in seen
+            self._tail = seen[-3:]
+        self.inner.data_received(data)
+
+    def eof_received(self):
+        return self.inner.eof_received()
+
+    def pause_writing(self) -> None:
+        self.inner.pause_writing()
+
+    def resume_writing(self) -> None:
+        self.inner.resume_writing()
+
+    def connection_lost(self, exc) -> None:
+        self._table.pop(self, None)
+        self._transport = None
+        self.inner.connection_lost(exc)
+
+
+class _Refused(asyncio.Protocol):
+    """A connection beyond MAX_CONNECTIONS: one 503 and closed, its descriptor given back at once."""
+
+    def connection_made(self, transport) -> None:
+        body = b'{"error": "too many HTTP connections; try again"}'
+        transport.write(_REFUSED % (len(body), body))
+        transport.close()
 
 
 def _peer_name(key: object) -> str:

@@ -140,7 +140,7 @@ class MessageTree:
 
 
 def _id(part: str) -> int:
-    if not part.isdigit():
+    if not (part.isascii() and part.isdigit()):
         raise KeyError(part)
     return int(part)
 
@@ -158,7 +158,7 @@ def _pointer(value: object, parts: list[str]) -> object:
         if isinstance(value, dict):
             value = value[part]
         elif isinstance(value, list):
-            if not part.isdigit() or int(part) >= len(value):
+            if not (part.isascii() and part.isdigit()) or int(part) >= len(value):
                 raise KeyError(part)
             value = value[int(part)]
         else:
