@@ -43,7 +43,8 @@ async def test_mavsdk_downloads_the_fence_and_rally_points_of_a_plan_put_over_ht
     daemon = gcsd_daemon({"http": {"address": "127.0.0.1:0"}})
     plan = json.loads(QGC_FILE.read_text(encoding="utf-8"))
     url = f"{http_url(daemon)}/v1/vehicles/1/mission"
-    async with aiohttp.ClientSession() as session, session.put(url, data=QGC_FILE.read_bytes()) as response:
+    async with aiohttp.ClientSession() as session, \
+            session.put(url, data=QGC_FILE.read_bytes(), headers={"Content-Type": "application/json"}) as response:
         assert (response.status, await response.json()) == (200, {"items": 4, "fence": 12, "rally": 3})
     fence = plan["geoFence"]
     expected_fence = [(VERTEX[p["inclusion"]], float(len(p["polygon"])), e7(lat), e7(lon))

@@ -50,3 +50,40 @@ def test_status_commands_failures_and_nonsense(tmp_path):
 
     asyncio.run(main())
     assert failures == ["channel_remove"]
+
+
+def test_the_socket_is_never_open_to_others_even_under_a_permissive_umask(tmp_path, monkeypatch):
+    """Issue 26: on 63f9fa5 the socket was bound under the process's umask and chmod'ed 0600 after;
+    under umask 000 it was srwxrwxrwx until then. Its mode is read at the chmod (the end of that
+    window), under umask 000."""
+    import os
+    import stat
+
+    path = tmp_path / "gcsd.sock"
+    seen = []
+    chmod = os.chmod
+
+    def spy(target, mode, *args, **kw):
+        if str(target) == str(path):
+            seen.append(stat.S_IMODE(os.stat(target).st_mode))
+        return chmod(target, mode, *args, **kw)
+
+    monkeypatch.setattr(os, "chmod", spy)
+
+    async def main():
+        old = os.umask(0)
+        try:
+            server = await control.serve(path, lambda: {"channels": []})
+        finally:
+            os.umask(old)
+        loop = asyncio.get_running_loop()
+        try:
+            assert await loop.run_in_executor(None, _ask, path, None) == {"channels": []}  # it serves
+        finally:
+            server.close()
+        return old
+
+    umask = asyncio.run(main())
+    assert seen and seen[0] & 0o077 == 0, f"mode {seen[0]:o} before the chmod"
+    assert stat.S_IMODE(os.stat(path).st_mode) == 0o600
+    assert os.umask(umask) == umask  # the process's umask is put back

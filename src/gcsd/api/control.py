@@ -9,8 +9,9 @@ Each connection carries one request, a JSON line, and gets one JSON document bac
   service's, summed over a swarm).
 - `{"cmd": "channel_add", "spec": {...}}` and `{"cmd": "channel_remove", "name": ...}`
   (`gcsd channel add|remove`, livechannels.py): `{"ok": true}` or `{"ok": false, "error": ...}`.
-The socket is the daemon's user's alone (0600 in state_dir): whoever can open it may change the
-channels, as whoever can send the daemon SIGHUP may reload them.
+The socket is the daemon's user's alone (created under a umask of 077, then 0600, in state_dir:
+never a moment open to others): whoever can open it may change the channels, as whoever can send
+the daemon SIGHUP may reload them.
 
 Finding a daemon (the rule `gcsd status` follows; relative paths in a configuration are relative
 to the daemon's working directory, so the socket's path depends on where it was started):
@@ -79,9 +80,25 @@ async def serve(path: Path, snapshot, commands: dict | None = None, on_error=Non
         finally:
             writer.close()
 
-    server = await asyncio.start_unix_server(answer, path=str(path))
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        bind_private(sock, path)
+        return await asyncio.start_unix_server(answer, sock=sock)
+    except BaseException:
+        sock.close()
+        raise
+
+
+def bind_private(sock: socket.socket, path: Path) -> None:
+    """Bind a Unix socket that is the user's alone from the instant it exists: created under a
+    umask of 077 (a socket's mode is 0777 minus the umask), then 0600. The umask is the
+    process's, so it is set and put back around the bind alone, a few microseconds."""
+    old = os.umask(0o077)
+    try:
+        sock.bind(str(path))
+    finally:
+        os.umask(old)
     os.chmod(path, 0o600)
-    return server
 
 
 async def _request(reader: asyncio.StreamReader) -> dict:
@@ -265,11 +282,21 @@ def format_channels(status: dict) -> str:
 
 
 def _http_line(http: dict | None) -> str:
+    """Where the API listens, read-only or not, its connections and its refusals by reason."""
     if http is None:
         return "HTTP API: off"
     if http.get("listening"):
-        return f'HTTP API: listening on {http["listening"]}'
-    return f'HTTP API: not listening on {http.get("address")} ({http.get("error") or "starting"}; retrying)'
+        line = f'HTTP API: listening on {http["listening"]}'
+        if http.get("read_only"):
+            line += " (read-only: signing.require and no token)"
+        if "connections" in http:
+            line += f', {http["connections"]} of {http.get("max_connections", "?")} connections'
+    else:
+        line = f'HTTP API: not listening on {http.get("address")} ({http.get("error") or "starting"}; retrying)'
+    refused = http.get("refused") or {}
+    if refused:
+        line += "; http_refused " + ", ".join(f"{reason} {n}" for reason, n in sorted(refused.items()))
+    return line
 
 
 def format_status(status: dict, daemon: dict | None = None) -> str:
