@@ -63,10 +63,10 @@ def _heartbeat(sysid: int, compid: int, mav_type: int = M.MAV_TYPE_GCS) -> bytes
 def measure(routes: int, extra: dict | None = None) -> tuple[float, int]:
     import tempfile
 
-    from gcsd.daemon.daemon import GCS
+    from gcsd.daemon.daemon import Daemon
 
     with tempfile.TemporaryDirectory() as tmp:
-        gcs = GCS(_config(tmp, routes, extra))
+        gcs = Daemon(_config(tmp, routes, extra))
         a, b = gcs.channels[0], gcs.channels[1]
         got = [0]
 

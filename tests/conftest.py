@@ -19,7 +19,7 @@ import pytest
 import yaml
 
 from gcsd.config import parse_config
-from gcsd.daemon.daemon import GCS
+from gcsd.daemon.daemon import Daemon
 
 START_TIMEOUT_S = 5.0
 
@@ -29,7 +29,7 @@ class RunningDaemon:
         self.config = config
         self.backend = backend  # gcsd.embed: backend(index) in place of the simulation
         self.producers = producers  # a telemetry table in place of gcsd.vehicle.telemetry.producers()
-        self.gcs: GCS | None = None
+        self.gcs: Daemon | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None
         self._ready = threading.Event()
@@ -40,7 +40,7 @@ class RunningDaemon:
         async def body():
             self._loop = asyncio.get_running_loop()
             self._stop = asyncio.Event()
-            self.gcs = GCS(self.config, backend=self.backend, producers=self.producers)
+            self.gcs = Daemon(self.config, backend=self.backend, producers=self.producers)
             runner = asyncio.create_task(self.gcs.run(self._stop))
             await self.gcs.ready.wait()
             self._ready.set()

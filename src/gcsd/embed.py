@@ -43,7 +43,7 @@ from typing import Protocol, runtime_checkable
 
 from gcsd.config import Config
 from gcsd.daemon import statelock
-from gcsd.daemon.daemon import GCS
+from gcsd.daemon.daemon import Daemon
 from gcsd.vehicle.sim import Limits, Setpoint, VehicleState
 
 
@@ -65,15 +65,15 @@ def _one_only(index: int):
     raise ValueError("a swarm (vehicle.count > 1) needs a backend factory: backend(index) -> VehicleBackend")
 
 
-def build(config: Config, backend: Backends) -> GCS:
-    """The GCS object (channels, router, vehicle nodes) with `backend` in place of the simulation."""
-    return GCS(config, backend=_factory(backend))
+def build(config: Config, backend: Backends) -> Daemon:
+    """The Daemon (channels, router, vehicle nodes) with `backend` in place of the simulation."""
+    return Daemon(config, backend=_factory(backend))
 
 
 async def serve(config: Config, backend: Backends, stop: asyncio.Event,
-                started: Callable[[GCS], None] | None = None) -> None:
+                started: Callable[[Daemon], None] | None = None) -> None:
     """Serve until `stop` is set; `started(gcs)` is called once it is ready, every server channel
-    bound and every client channel tried (the GCS object then gives the real ports:
+    bound and every client channel tried (the Daemon then gives the real ports:
     `gcs.channels[i].local_address`)."""
     config.state_dir.mkdir(parents=True, exist_ok=True)
     lock = statelock.acquire(config.state_dir)  # one daemon per state_dir (StateDirBusy otherwise)
@@ -102,7 +102,7 @@ def run(config: Config, backend: Backends) -> int:
         loop = asyncio.get_running_loop()
         for signum in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(signum, stop.set)
-        running: list[GCS] = []
+        running: list[Daemon] = []
         loop.add_signal_handler(signal.SIGHUP, lambda: running and running[0].sync_state())
         try:
             await serve(config, backend, stop, started=running.append)

@@ -14,7 +14,7 @@ import subprocess
 import sys
 import time
 
-from gcsd.daemon.daemon import GCS
+from gcsd.daemon.daemon import Daemon
 from gcsd.links.channel import Channel
 from gcsd.vehicle.services.params import ParamService
 from gcsd.vehicle.services.rates import RatesService
@@ -71,14 +71,14 @@ def test_a_raising_command_handler_is_counted_acked_failed_and_shown_by_gcsd_sta
 
 
 def test_a_raise_in_the_signing_check_is_counted_and_the_tcp_connection_lives_on(daemon, client, monkeypatch):
-    original = GCS.verify
+    original = Daemon.verify
 
     def verify(self, channel, frame):
         if frame.msgid == PING:
             raise RuntimeError("deliberately broken signing check")
         return original(self, channel, frame)
 
-    monkeypatch.setattr(GCS, "verify", verify)
+    monkeypatch.setattr(Daemon, "verify", verify)
     # a key: without one (and nothing required) every frame is accepted untouched, the check never runs
     d = daemon({"signing": {"key": KEY.hex()}, "channels": [tcp_channel("tcp")]})
     station = client(tcp_url(d.port("tcp")))
@@ -95,7 +95,7 @@ def test_a_raise_when_a_peer_is_admitted_is_counted_and_the_peer_is_served(daemo
     def joined(self, channel, peer):
         raise RuntimeError("deliberately broken admission hook")
 
-    monkeypatch.setattr(GCS, "on_peer_joined", joined)
+    monkeypatch.setattr(Daemon, "on_peer_joined", joined)
     d = daemon({"channels": [udp_channel("gcs")]})
     station = client(udp_url(d.port("gcs")))
     station.heartbeat()
@@ -142,7 +142,7 @@ def test_a_raise_in_the_stats_task_is_counted_and_the_daemon_keeps_serving(daemo
         raise RuntimeError("deliberately broken stats pass")
 
     monkeypatch.setattr(gcs, "STATS_INTERVAL_S", 1.0)
-    monkeypatch.setattr(GCS, "_stats_pass", broken)
+    monkeypatch.setattr(Daemon, "_stats_pass", broken)
     d = daemon({"channels": [udp_channel("gcs")]})
     station = client(udp_url(d.port("gcs")))
     station.heartbeat()

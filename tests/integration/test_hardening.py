@@ -19,7 +19,7 @@ import pytest
 import yaml
 
 from gcsd.config import parse_config
-from gcsd.daemon.daemon import GCS
+from gcsd.daemon.daemon import Daemon
 from gcsd.vehicle.sim import Landed
 
 from .helpers import VEHICLE, Client, M, is_ack, packed, pump, udp_channel, udp_url, wait_for
@@ -290,7 +290,7 @@ async def test_the_simulation_steps_with_no_link_up(tmp_path):
         "channels": [{"name": "fc", "type": "tcp-client", "address": f"127.0.0.1:{port}"}],
     }), "test.yaml")
     backend = _CountingBackend()
-    gcs = GCS(config, backend=lambda index: backend)
+    gcs = Daemon(config, backend=lambda index: backend)
     stop = asyncio.Event()
     runner = asyncio.create_task(gcs.run(stop))
     try:

@@ -12,6 +12,7 @@ import pytest
 import yaml
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 from pymavlink.dialects.v20 import ardupilotmega as M
+from receivers import Recorder
 
 from gcsd.config import parse_config
 from gcsd.links.channel import MAX_FRAME_BYTES, UDP_PEER_TIMEOUT_S, Channel
@@ -41,15 +42,15 @@ RADIO_STATUS = packed(M.MAVLink_radio_status_message(200, 200, 40, 0, 0, 0, 0), 
 GARBAGE = bytes(range(7, 60))
 
 
-def make_channel(clock: Clock, **extra) -> tuple[Channel, dict[object, list[bytes]]]:
+def make_channel(clock: Clock, receiver: Recorder | None = None, **extra) -> tuple[Channel, dict[object, list[bytes]]]:
     """A udp-server channel; returns it and what each admitted peer was sent. The frames it hands
     on are in `handed_on[channel]`."""
     conf = {"channels": [{"name": "gcs", "type": "udp-server", "address": "127.0.0.1:0", **extra}]}
     config = parse_config(yaml.safe_dump(conf), "test.yaml")
-    ch = Channel(0, config.channels[0], clock)
+    receiver = receiver or Recorder()
+    ch = Channel(0, config.channels[0], clock, receiver=receiver)
     sent: dict[object, list[bytes]] = {}
-    frames = handed_on[ch] = []
-    ch.on_frame = lambda channel, frame, now: frames.append(frame)
+    handed_on[ch] = receiver.frames
 
     def make_writer(key):
         out = sent.setdefault(key, [])
@@ -209,12 +210,10 @@ def test_radio_status_alone_does_not_admit_a_source():
 
 def test_a_frame_that_fails_verification_admits_nobody_and_is_not_handed_on():
     clock = Clock()
-    ch, _sent = make_channel(clock)
-    rejected = []
-    ch.verify = lambda frame: "unsigned"
-    ch.on_reject = lambda channel, frame, reason, now: rejected.append(reason)
+    receiver = Recorder("unsigned")
+    ch, _sent = make_channel(clock, receiver)
     datagram(ch, ("10.0.0.1", 5), HEARTBEAT, clock.t)
-    assert rejected == ["unsigned"]
+    assert receiver.rejects == ["unsigned"]
     assert handed_on.pop(ch) == []
     snap = ch.snapshot()
     assert (snap["peers"], snap["packets_in"]) == (0, 0)

@@ -7,21 +7,21 @@ from __future__ import annotations
 import pytest
 from pymavlink.dialects.v10 import ardupilotmega as M1
 from pymavlink.dialects.v20 import ardupilotmega as M
+from receivers import Recorder
 
 from gcsd.config import parse_config
 from gcsd.links.channel import Channel
 
 
-def make_channel(**extra) -> tuple[Channel, dict, list]:
+def make_channel(verdict: str | None = None, **extra) -> tuple[Channel, dict, list]:
     conf = {"name": "gcs", "type": "udp-server", "address": "127.0.0.1:0", **extra}
     config = parse_config(f"channels: [{conf!r}]".replace("'", '"'), "t.yaml").channels[0]
     clock = [0.0]
-    ch = Channel(0, config, lambda: clock[0])
+    receiver = Recorder(verdict)
+    ch = Channel(0, config, lambda: clock[0], receiver=receiver)
     outbox: dict[object, list[bytes]] = {}
     ch.make_writer = lambda key: (lambda data: outbox.setdefault(key, []).append(data) or True)
-    handled: list = []
-    ch.on_frame = lambda channel, frame, now: handled.append((frame.sysid, frame.name))
-    return ch, outbox, handled
+    return ch, outbox, receiver
 
 
 def heartbeat(sysid=255, v1=False) -> bytes:
@@ -35,12 +35,9 @@ def datagram(ch: Channel, addr, data: bytes, now: float = 0.0) -> None:
 
 
 def test_a_rejected_frame_admits_nobody_and_changes_no_counter_but_the_rejects():
-    ch, _outbox, handled = make_channel()
-    ch.verify = lambda frame: "unsigned"
-    rejects = []
-    ch.on_reject = lambda channel, frame, reason, now: rejects.append(reason)
+    ch, _outbox, receiver = make_channel("unsigned")
     datagram(ch, ("10.0.0.1", 5), heartbeat())
-    assert ch.peers == {} and handled == [] and rejects == ["unsigned"]
+    assert ch.peers == {} and receiver.frames == [] and receiver.rejects == ["unsigned"]
     snap = ch.snapshot()
     assert snap["packets_in"] == 0 and snap["bytes_in"] == 0
 
@@ -61,7 +58,7 @@ def test_a_truncated_datagram_leaves_nothing_behind_for_the_next(garbage):
     ch, _outbox, handled = make_channel()
     datagram(ch, ("a", 1), garbage)
     datagram(ch, ("b", 2), heartbeat())
-    assert handled == [(255, "HEARTBEAT")] and list(ch.peers) == [("b", 2)]
+    assert [(f.sysid, f.name) for f in handled.frames] == [(255, "HEARTBEAT")] and list(ch.peers) == [("b", 2)]
 
 
 def test_a_connection_that_never_sent_a_good_frame_is_dropped_before_a_talking_station():

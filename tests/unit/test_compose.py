@@ -10,7 +10,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from gcsd.clock import Clock
 from gcsd.config import parse_config
 from gcsd.daemon import compose
-from gcsd.daemon.daemon import GCS
+from gcsd.daemon.daemon import Daemon
 from gcsd.vehicle.services import Service
 from gcsd.wire.codec import FrameParser
 from gcsd.wire.msgids import ACCEPTED
@@ -46,7 +46,7 @@ def _daemon(tmp_path, monkeypatch):
     config = parse_config(yaml.safe_dump({"state_dir": str(tmp_path), "channels": [
         {"name": "gcs", "type": "udp-server", "address": "127.0.0.1:0"}]}), "t.yaml")
     t = [100.0]
-    gcs = GCS(config, Clock(monotonic=lambda: t[0], wall=lambda: 1.8e9))
+    gcs = Daemon(config, Clock(monotonic=lambda: t[0], wall=lambda: 1.8e9))
     sent: list[bytes] = []
     channel = gcs.channels[0]
     peer = channel.add_peer("station", lambda data: sent.append(data) or True, 100.0)

@@ -12,7 +12,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from gcsd.clock import Clock
 from gcsd.config import parse_config
 from gcsd.config.schema import DEFAULT_STREAM_RATES_HZ, LOCAL_TYPE, MAX_CHANNELS, ChannelConfig, mavlink_slot
-from gcsd.daemon.daemon import GCS
+from gcsd.daemon.daemon import Daemon
 
 RAW_IMU = M.MAVLINK_MSG_ID_RAW_IMU  # stream raw_sens
 DEFAULT_RAW_SENS_MS = 1000 // DEFAULT_STREAM_RATES_HZ["raw_sens"]
@@ -22,15 +22,15 @@ def _udp(name: str) -> dict:
     return {"name": name, "type": "udp-server", "address": "127.0.0.1:0"}
 
 
-def _gcs(tmp_path, channels: list[dict], http: dict | None = None) -> GCS:
+def _gcs(tmp_path, channels: list[dict], http: dict | None = None) -> Daemon:
     data = {"state_dir": str(tmp_path), "channels": channels}
     if http is not None:
         data["http"] = http
     config = parse_config(yaml.safe_dump(data), "t.yaml")
-    return GCS(config, Clock(monotonic=lambda: 100.0, wall=lambda: 1.8e9))
+    return Daemon(config, Clock(monotonic=lambda: 100.0, wall=lambda: 1.8e9))
 
 
-def _param_set(gcs: GCS, name: str, value: float) -> None:
+def _param_set(gcs: Daemon, name: str, value: float) -> None:
     channel = gcs.channels[0]
     peer = channel.peers.get("station") or channel.add_peer("station", lambda data: True, 100.0)
     mav = M.MAVLink(None, srcSystem=255, srcComponent=190)

@@ -25,7 +25,6 @@ def _channel(now: list[float]) -> tuple[Channel, list[bytes]]:
     ch = Channel(0, parse_config(yaml.safe_dump(conf), "t.yaml").channels[0], lambda: now[0])
     sent: list[bytes] = []
     ch.make_writer = lambda key: lambda data: sent.append(data) or True
-    ch.on_frame = lambda channel, frame, t: None
     ch.tick(now[0], 0.0)
     ch.receive(ch.stranger(ADDR, now[0]), HEARTBEAT, now[0], datagram=True)  # a ground station: a peer
     return ch, sent

@@ -1,4 +1,4 @@
-"""The daemon's lifetime: build the GCS, serve until SIGINT/SIGTERM, stop cleanly.
+"""The daemon's lifetime: build the Daemon, serve until SIGINT/SIGTERM, stop cleanly.
 
 A first signal asks for a clean stop (tasks cancelled, transports closed); a second one while
 stopping exits at once. Returns the process exit code: 0 clean stop, 1 failure, 2 a bad
@@ -28,7 +28,7 @@ from gcsd.api import control
 from gcsd.config import Config, ConfigError, load_config, preflight
 from gcsd.config.schema import LOCAL_TYPE
 from gcsd.daemon import statelock
-from gcsd.daemon.daemon import GCS
+from gcsd.daemon.daemon import Daemon
 from gcsd.daemon.notify import Notifier
 from gcsd.links import tcpserver
 from gcsd.links.transport import ChannelStartError
@@ -52,7 +52,7 @@ async def run_daemon(config: Config) -> int:
 
     for signum in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(signum, on_signal, signum)
-    gcs_ref: list[GCS] = []
+    gcs_ref: list[Daemon] = []
     loop.add_signal_handler(signal.SIGHUP, lambda: gcs_ref and _reload(gcs_ref[0], loop))
     lock = None
     try:
@@ -63,7 +63,7 @@ async def run_daemon(config: Config) -> int:
         limit, needed = tcpserver.ensure_descriptor_budget(tcpserver.descriptors_needed(config.channels))
         if limit < needed:  # the hard limit is lower: connections may be refused (counted, tcpserver.py)
             log.warning("descriptor_budget_short", limit=limit, needed=needed)
-        gcs = GCS(config)
+        gcs = Daemon(config)
         gcs_ref.append(gcs)
         log.info(
             "daemon_started", vehicle=config.vehicle.type, sysid=config.vehicle.sysid,
@@ -91,7 +91,7 @@ async def run_daemon(config: Config) -> int:
     return 0
 
 
-def _reload(gcs: GCS, loop: asyncio.AbstractEventLoop) -> None:
+def _reload(gcs: Daemon, loop: asyncio.AbstractEventLoop) -> None:
     """SIGHUP: write out changed state (parameters, signing timestamp), then re-read the
     configuration file and apply its channels (livechannels.py); a bad file is logged, line by
     line, and changes nothing. The daemon keeps running whatever the file says."""
@@ -121,7 +121,7 @@ def _reloaded(task: asyncio.Task) -> None:
         log.error("reload_failed", error=repr(task.exception()))
 
 
-def ready_status(gcs: GCS) -> str:
+def ready_status(gcs: Daemon) -> str:
     """systemd's status line at READY: the MAVLink channels open (the HTTP API's own channel is
     none of them, config_schema.mavlink_slot) and where the API listens, or why it does not."""
     mavlink = [ch for ch in gcs.channels if ch.config.type != LOCAL_TYPE]
@@ -134,8 +134,8 @@ def ready_status(gcs: GCS) -> str:
     return f"{text}, HTTP API not listening on {http['address']} ({http['error']}; retrying)"
 
 
-async def _run_with_notify(gcs: GCS, stop: asyncio.Event, notifier: Notifier) -> None:
-    """Run the GCS; tell systemd when it is ready (servers bound, clients tried), and ping its watchdog
+async def _run_with_notify(gcs: Daemon, stop: asyncio.Event, notifier: Notifier) -> None:
+    """Run the Daemon; tell systemd when it is ready (servers bound, clients tried), and ping its watchdog
     from the loop."""
 
     async def tell_systemd() -> None:

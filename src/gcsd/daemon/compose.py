@@ -1,10 +1,12 @@
 """The composition root: the one place that builds the daemon's parts and wires them.
 
-`build(gcs, backend)` makes, for a GCS object: the channels and their callbacks, the signing
-manager, the tlog, one vehicle node per simulated vehicle (parameters, state, autopilot, links,
-the services of SERVICES in order, their message and command tables and their parameter
-listeners) and the router. Nothing else constructs a service, registers a handler, a command,
-a parameter listener or a channel callback (tests/unit/test_architecture.py).
+`build(config, ...) -> Parts` makes what a Daemon serves with: the signing manager, the tlog,
+the channels (each constructed with its receiver, the daemon, and the shared wake time, signing,
+tlog and error counts), one vehicle node per simulated vehicle (parameters, state, autopilot,
+links, the services of SERVICES in order, their message and command tables and their parameter
+listeners), the router and the ingress decision over it (routing/ingress.py). Nothing else
+constructs a service, registers a handler, a command, a parameter listener or a channel
+(tests/unit/test_architecture.py).
 
 Services are listed in SERVICES, in order: (name, factory(node, wiring) -> service or None).
 Each declares what it handles (`handle_<MESSAGE>` methods, `commands()`); the tables are built
@@ -32,12 +34,13 @@ from gcsd.api.http import wiring as http_wiring
 from gcsd.config import MAX_CHANNELS, ChannelConfig, Config
 from gcsd.config.mqtt import route_capacity
 from gcsd.config.schema import LOCAL_TYPE, mavlink_slot
-from gcsd.links.channel import Channel
+from gcsd.links.channel import Channel, Receiver
 from gcsd.links.outbox import WakeTime
 from gcsd.links.tlog import TlogWriter
 from gcsd.payloads import build as payload
 from gcsd.payloads.logs.wiring import flight_log_service, log_dir
 from gcsd.persist import WriteBehind
+from gcsd.routing.ingress import Ingress
 from gcsd.routing.router import MAX_ROUTES, Router, RouteTable
 from gcsd.vehicle import telemetry
 from gcsd.vehicle.autopilot.core import Autopilot
@@ -295,60 +298,77 @@ def _wire_params(node: VehicleNode, config: Config, clock) -> None:
     params.on_change("BATT_CAPACITY", lambda n, _v: setattr(node.state, "capacity_mah", float(params.clamped(n))))
 
 
-def build(gcs, channels, backend=None, producers: dict | None = None) -> None:
-    """Everything a GCS object serves with (gcs.py): channels, signing, tlog, vehicles, router."""
-    config, clock, errors = gcs.config, gcs.clock, gcs.errors
-    gcs.signing_manager = SigningManager(
+@dataclass(frozen=True)
+class ChannelParts:
+    """What every channel of a daemon is built with (at start, and for one added at run time)."""
+
+    receiver: Receiver  # the daemon
+    wake_time: WakeTime
+    signing: object
+    tlog: TlogWriter | None
+    errors: object
+    clock: object
+    signing_required: bool
+
+
+@dataclass(frozen=True)
+class Parts:
+    """What a daemon serves with, built once (daemon.py): nothing is wired onto it afterwards."""
+
+    signing_manager: SigningManager
+    signing_writer: WriteBehind  # the signing timestamp, saved every SAVE_INTERVAL_S off the loop
+    tlog: TlogWriter | None
+    wake_time: WakeTime  # the asyncio layer's time at each wake-up, shared by every channel
+    channels: list[Channel]
+    nodes: list[VehicleNode]
+    router: Router
+    ingress: Ingress
+    taps: list  # tap(channel, frame, now) of every accepted frame, before routing
+    channel_parts: ChannelParts  # for a channel added at run time
+
+
+def build(config: Config, clock, errors, receiver, channels, wake_node, backend=None,
+          producers: dict | None = None) -> Parts:
+    """Everything a daemon serves with: signing, tlog, channels (frames to `receiver`), vehicles
+    (`wake_node(index, channel)`), router and ingress."""
+    signing_manager = SigningManager(
         config.signing.key, config.signing.require, SigningStore(Path(config.state_dir) / "signing.key"),
         clock.wall(),
     )
-    gcs.signing = gcs.signing_manager.signing
-    # the signing timestamp, saved every SAVE_INTERVAL_S off the loop (mode 0600, atomic)
-    gcs.signing_writer = WriteBehind(gcs.signing_manager.store.path, gcs.signing_manager, clock.now,
-                                     write=SigningStore.write, errors=errors)
-    gcs.tlog = TlogWriter(config.log.tlog) if config.log.tlog else None
-    gcs.wake_time = WakeTime()  # the asyncio layer's time at each wake-up, shared by every channel
+    signing_writer = WriteBehind(signing_manager.store.path, signing_manager, clock.now,
+                                 write=SigningStore.write, errors=errors)  # mode 0600, atomic
+    tlog = TlogWriter(config.log.tlog) if config.log.tlog else None
+    wake_time = WakeTime()
+    parts = ChannelParts(receiver, wake_time, signing_manager.signing, tlog, errors, clock, config.signing.require)
     # the HTTP API's own channel comes after the configured ones (gcsd.api.http.wiring)
-    gcs.channels = [channel(gcs, i, c) for i, c in enumerate([*channels, *http_wiring.channel_configs(config)])]
+    chans = [channel(parts, i, c) for i, c in enumerate([*channels, *http_wiring.channel_configs(config)])]
     count = config.vehicle.count
     planned = sysids.start_sysids([config.vehicle.sysid + i for i in range(count)],
                                   [_saved_sysid(config, i) for i in range(count)]) if count > 1 else [None]
-    gcs.nodes = [
-        build_vehicle(i, config, clock, gcs.channels, functools.partial(gcs.wake_node, i), errors,
-                      gcs.signing_manager, backend=None if backend is None else backend(i), producers=producers,
+    nodes = [
+        build_vehicle(i, config, clock, chans, functools.partial(wake_node, i), errors,
+                      signing_manager, backend=None if backend is None else backend(i), producers=producers,
                       sysid=planned[i])
         for i in range(count)
     ]
     if count > 1:  # a swarm refuses a SYSID_THISMAV another vehicle has (params/sysids.py)
-        for i, node in enumerate(gcs.nodes):
+        for i, node in enumerate(nodes):
             for service in node.services:
                 if isinstance(service, ParamService):
-                    service.vet = functools.partial(_vet_sysid, gcs.nodes, i)
-    gcs.router = Router({(n.sysid, c) for n in gcs.nodes for c in (n.compid, *n.local_compids)},
-                        [ch.policy for ch in gcs.channels],
-                        RouteTable(route_capacity((c.type for c in config.channels), MAX_ROUTES)))
-    # taps: every accepted frame, after signing, filters and loop checks, before routing
-    gcs.taps = [service.tap for n in gcs.nodes for service in n.services if hasattr(service, "tap")]
-    gcs.http = http_wiring.attach(gcs)  # the HTTP API over all of it, or None (`http.address: null`)
-    if gcs.http is not None:
-        gcs.taps.append(gcs.http.tap)  # its message tree takes every accepted frame
+                    service.vet = functools.partial(_vet_sysid, nodes, i)
+    router = Router({(n.sysid, c) for n in nodes for c in (n.compid, *n.local_compids)},
+                    [ch.policy for ch in chans],
+                    RouteTable(route_capacity((c.type for c in config.channels), MAX_ROUTES)))
+    taps = [service.tap for n in nodes for service in n.services if hasattr(service, "tap")]
+    return Parts(signing_manager, signing_writer, tlog, wake_time, chans, nodes, router,
+                 Ingress(router, signing_manager.signing, config.routing.dedup_ms), taps, parts)
 
 
-def channel(gcs, index: int, config: ChannelConfig) -> Channel:
+def channel(parts: ChannelParts, index: int, config: ChannelConfig) -> Channel:
     """A channel connected to the daemon's receive path, signing, tlog and error boundary (at
     start, and for a channel added at run time: livechannels.py)."""
-    ch = http_wiring.channel_class(config)(index, config, gcs.clock.now)
-    ch.out.time = gcs.wake_time
-    ch.out.signing = gcs.signing
-    ch.wall = gcs.clock.wall
-    ch.out.tlog = gcs.tlog
-    ch.errors = gcs.errors
-    ch.verify = functools.partial(gcs.verify, ch)
-    ch.on_frame = gcs.on_frame
-    ch.on_reject = gcs.reject
-    ch.on_bad_crc = gcs.on_bad_crc
-    ch.on_peer_joined = gcs.on_peer_joined
-    # a tcp-server connection is served before its first good frame unless signatures are
-    # required there (TCP cannot be spoofed: no amplification; see channel.py)
-    ch.serve_on_connect = not (gcs.config.signing.require and not ch.unsigned_ok)
+    ch = http_wiring.channel_class(config)(
+        index, config, parts.clock.now, receiver=parts.receiver, wake_time=parts.wake_time,
+        signing=parts.signing, tlog=parts.tlog, errors=parts.errors, wall=parts.clock.wall,
+        signing_required=parts.signing_required)
     return ch

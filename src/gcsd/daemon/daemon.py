@@ -1,15 +1,14 @@
-"""The GCS object: the composition root. It wires channels, the router and the local
-components (one VehicleNode per simulated vehicle) and handles no message itself.
+"""The daemon: it runs the parts compose.build made (channels, router, ingress, vehicles) and
+applies what the ingress decides for each frame; it handles no message itself.
 
-Receive path for every good frame on a channel: the channel has it verified first (the signing
-check, `verify`; a frame that fails changes nothing but the reject counters, see channel.py),
-then here: drop it if the same bytes came in lately on a link of the same redundant group (or on
-any channel, with routing.dedup_ms; counted `duplicates`), drop it if it is a frame this daemon
-forwarded less than LOOP_WINDOW_S ago (a
-forwarding loop, counted `loop_dropped`; dedup.py), mark the channel active (anything but
-RADIO_STATUS), ask the router (learn, forward, process locally?), write the raw frame to the
-chosen channels (remembering it), then hand the decoded message to the local component(s) it is for. Frames with a bad CRC are dropped and counted, or, on a
-`forward_bad_crc` channel, forwarded unchanged as broadcasts and never processed.
+Receive path for every good frame on a channel (links/channel.py parses it and admits its peer):
+the signing check (`verify`, routing/ingress.py; a frame that fails changes nothing but the
+reject counters), the channel's input filter, then `on_frame`: the ingress decides the frame's
+fate (duplicate, loop, or where it goes, whether it is signed by the gateway, handled here,
+shown to the taps, answered with a stream request), and this applies it: taps, writes to the
+chosen channels' outboxes, the stream request, the local components' handlers. Frames with a
+bad CRC are dropped and counted, or, on a `forward_bad_crc` channel, forwarded unchanged as
+broadcasts and never processed.
 
 Tasks (one TaskGroup): one per channel (receive in callbacks, send passes), the simulation (every
 node's autopilot and simulation or embedding backend, SIM_RATE_HZ, whether or not any link is
@@ -31,6 +30,7 @@ import structlog
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.api import control, status
+from gcsd.api.http import wiring as http_wiring
 from gcsd.boundary import ErrorCounts
 from gcsd.clock import Clock
 from gcsd.config import MAX_CHANNELS, Config
@@ -39,44 +39,39 @@ from gcsd.daemon import compose
 from gcsd.daemon.livechannels import LiveChannels, load_specs
 from gcsd.links.channel import Channel, Peer
 from gcsd.links.transport import ChannelStartError
-from gcsd.routing.dedup import LOOP_WINDOW_S, RecentFrames
-from gcsd.routing.signgate import signed_copy
 from gcsd.vehicle.autopilot.core import DEFAULT_SIM_PERIOD_S
 from gcsd.vehicle.node import VehicleNode
 from gcsd.wire.codec import Frame
 from gcsd.wire.msgids import HEARTBEAT as MSG_ID_HEARTBEAT
-from gcsd.wire.msgids import is_radio
 from gcsd.wire.signing import SAVE_INTERVAL_S
 
 log = structlog.get_logger("gcsd.daemon.daemon")
 
-MSG_ID_SYSTEM_TIME = 2
 STATS_INTERVAL_S = 10.0
 IDLE_NODE_PASS_S = 0.5  # a node with nothing scheduled still gets a pass this often (its simulation steps)
 
 
-class GCS:
+class Daemon:
     def __init__(self, config: Config, clock: Clock | None = None, backend=None, producers: dict | None = None) -> None:
         """`backend(index)`: an embedding program's vehicle in place of the simulation (gcsd.embed);
         `producers`: a telemetry table in place of gcsd.vehicle.telemetry.producers() (tests)."""
         self.config = config
         self.clock = clock or Clock()
         self.errors = ErrorCounts()
-        self.active: set[int] = set()
         self.opened: set[int] = set()  # channels open at least once
         self._tried: set[int] = set()  # channels opened or, for a client, tried once
         self.ready = asyncio.Event()  # every server channel bound, every client channel tried
-        self.bad_crc_forwarded = 0
         self.rates: dict[str, tuple[float, float]] = {}
-        self.taps: list = []  # tap(channel, frame, now) of every accepted frame (compose.py)
-        self.loops = RecentFrames(LOOP_WINDOW_S)  # frames forwarded lately: one coming back is a loop
-        # routing.dedup_ms: every frame; else the frames of redundant link groups, within LOOP_WINDOW_S
-        dedup_ms = config.routing.dedup_ms
-        self.dedup = RecentFrames(dedup_ms / 1000 if dedup_ms else LOOP_WINDOW_S)
-        self.dedup_all = dedup_ms > 0  # else only the channels of a group (Channel.dedup)
         restored = load_specs(Path(config.state_dir), config.channels)  # channels added at run time
-        # channels, signing, tlog, vehicles, router and every callback: the composition root
-        compose.build(self, [*config.channels, *(c for _, c in restored)], backend, producers)
+        parts = compose.build(config, self.clock, self.errors, self,
+                              [*config.channels, *(c for _, c in restored)], self.wake_node, backend, producers)
+        self.parts = parts
+        self.channels, self.nodes, self.router, self.ingress = parts.channels, parts.nodes, parts.router, parts.ingress
+        self.signing_manager, self.signing = parts.signing_manager, parts.signing_manager.signing
+        self.taps = list(parts.taps)
+        self.http = http_wiring.attach(self)  # the HTTP API over all of it, or None (`http.address: null`)
+        if self.http is not None:
+            self.taps.append(self.http.tap)  # its message tree takes every accepted frame
         self._wakeups = [asyncio.Event() for _ in self.channels]
         # per channel, when each node next needs a send pass (0: now)
         self._node_due = [[0.0] * len(self.nodes) for _ in self.channels]
@@ -86,8 +81,6 @@ class GCS:
             log.warning("signing_timestamp_repaired", reason=self.signing_manager.load_repair)
         self.started_s = self.clock.now()
         self._by_sysid = {n.sysid: n for n in self.nodes}
-        for ch in self.channels:
-            ch.dedup = ch.dedup or self.dedup_all
         self.live = LiveChannels(self, restored)
 
     # --- channels at run time (livechannels.py) ------------------------------------------------
@@ -103,8 +96,7 @@ class GCS:
 
     def attach(self, index: int, config: ChannelConfig) -> Channel:
         """A new channel in slot `index`: wired, known to the router and to every vehicle."""
-        ch = compose.channel(self, index, config)
-        ch.dedup = ch.dedup or self.dedup_all
+        ch = compose.channel(self.parts.channel_parts, index, config)
         if index == len(self.channels):
             self.channels.append(ch)
             self._wakeups.append(asyncio.Event())
@@ -124,7 +116,7 @@ class GCS:
         ch.drop_all_peers()
         ch.retired = True
         self.router.table.forget_channel(ch.index)
-        self.active.discard(ch.index)
+        self.ingress.active.discard(ch.index)
 
     def wake(self, channel: Channel) -> None:
         self._wakeups[channel.index].set()
@@ -133,55 +125,39 @@ class GCS:
         self._node_due[channel.index][index] = 0.0
         self._wakeups[channel.index].set()
 
-    # --- receive ---------------------------------------------------------------------------
+    # --- receive: links.channel.Receiver ---------------------------------------------------
+    @property
+    def active(self) -> set[int]:
+        return self.ingress.active
+
+    @property
+    def bad_crc_forwarded(self) -> int:
+        return self.ingress.bad_crc_forwarded
+
     def verify(self, channel: Channel, frame: Frame) -> str | None:
         """The signing check, before anything else looks at the frame: None (accepted) or why not."""
-        signing = self.signing
-        if not signing.checks_needed:
-            return None
-        return signing.check(frame.raw, frame.msgid, frame.sysid, frame.compid, channel.unsigned_ok,
-                             self.clock.wall())
+        return self.ingress.verify(channel, frame, channel.out.time.wall)
 
     def on_frame(self, channel: Channel, frame: Frame, now: float) -> None:
-        """Route one accepted frame and hand it to the local components it is for (inside the
-        channel's receive boundary)."""
-        if channel.dedup and self.dedup.check(frame.raw, now):
-            channel.stats.duplicates += 1  # the copy that came the other way (a group), or dedup_ms
+        """Apply the ingress's decision on one accepted frame (inside the channel's receive boundary)."""
+        fate = self.ingress.decide(channel, frame, now)
+        if fate.drop is not None:
+            setattr(channel.stats, fate.drop, getattr(channel.stats, fate.drop) + 1)
             return
-        if self.loops.seen(frame.raw, now):  # a frame we forwarded, back again: a loop (dedup.py)
-            channel.stats.loop_dropped += 1
-            return
-        if self.taps:
-            for tap in self.taps:
-                tap(channel, frame, now)
-        msgid = frame.msgid
-        if channel.index not in self.active and not is_radio(msgid):
-            self.active.add(channel.index)
-        decision = self.router.decide(
-            channel.index, msgid, frame.sysid, frame.compid, frame.target_system, frame.target_component,
-            now, self.active, frame.known,
-            frame.msg.type if msgid == MSG_ID_HEARTBEAT and frame.known else None,
-        )
-        if decision.out_channels:
-            raw = frame.raw
-            if channel.sign_forwarded and self.signing.key is not None:
-                raw = self._signed(channel, raw)
-            self.loops.remember(raw, now)  # the bytes that go out: what a loop brings back
+        for tap in self.taps:
+            tap(channel, frame, now)
+        if fate.forward:
+            raw = self.ingress.signed(channel, frame.raw, now, channel.out.time.wall) if fate.sign else frame.raw
             channels = self.channels
-            for index in decision.out_channels:
+            for index in fate.forward:
                 channels[index].out.write(raw)
-        if channel.stream_requests is not None and (msgid == MSG_ID_HEARTBEAT or msgid == MSG_ID_SYSTEM_TIME):
+        if fate.streams:
             self._request_streams(channel, frame, now)
-        if decision.process_locally and frame.known:
+        if fate.local:
             for node in self._nodes_for(frame.target_system, frame.target_component):
                 node.handle(channel, frame, now)
                 for due in self._node_due:  # whatever it queued goes out at the next pass
                     due[node.index] = 0.0
-
-    def _signed(self, channel: Channel, raw: bytes) -> bytes:
-        """The signing gateway: an unsigned frame from a sign_forwarded channel, signed (signgate.py)."""
-        signed = signed_copy(raw, self.signing.key, channel.index, self.signing.next_timestamp(self.clock.wall()))
-        return raw if signed is None else signed
 
     def _request_streams(self, channel: Channel, frame: Frame, now: float) -> None:
         """request_streams: REQUEST_DATA_STREAM to an autopilot first heard or rebooted (streamreq.py)."""
@@ -208,7 +184,7 @@ class GCS:
             return [n for n in self.nodes if n.compid == target_component] or self.nodes
         return self.nodes
 
-    def reject(self, channel: Channel, frame: Frame, reason: str, now: float) -> None:
+    def on_reject(self, channel: Channel, frame: Frame, reason: str, now: float) -> None:
         """A frame that failed the signing checks: counted, never learned, forwarded or handled."""
         channel.stats.signature_rejects += 1
         channel.signature_reject_reasons[reason] = channel.signature_reject_reasons.get(reason, 0) + 1
@@ -224,15 +200,13 @@ class GCS:
         for node in self.nodes:
             node.link(channel).push(MSG_ID_HEARTBEAT)
 
-    def on_bad_crc(self, channel: Channel, raw: bytes) -> None:
-        now = self.clock.now()
-        if self.loops.seen(raw, now):
+    def on_bad_crc(self, channel: Channel, raw: bytes, now: float) -> None:
+        out = self.ingress.bad_crc(channel, raw, now)
+        if out is None:
             channel.stats.loop_dropped += 1
             return
-        self.loops.remember(raw, now)
-        for index in self.router.broadcast_channels(channel.index):
+        for index in out:
             self.channels[index].write(raw)
-        self.bad_crc_forwarded += 1
 
     # --- send ------------------------------------------------------------------------------
     def send_pass(self, channel: Channel, now: float) -> float | None:
@@ -277,8 +251,8 @@ class GCS:
             if server is not None:
                 server.close()
                 sock_path.unlink(missing_ok=True)
-            if self.tlog is not None:
-                self.tlog.close()
+            if self.parts.tlog is not None:
+                self.parts.tlog.close()
 
     async def _serve(self, stop: asyncio.Event) -> None:
         try:
@@ -297,7 +271,7 @@ class GCS:
             with self.errors.guard("sync", now, sysid=node.sysid):
                 node.sync()
         with self.errors.guard("sync", now):
-            self.signing_writer.sync()  # not "clean": the daemon goes on signing
+            self.parts.signing_writer.sync()  # not "clean": the daemon goes on signing
         log.info("state_synced", vehicles=len(self.nodes))
 
     def _flush(self) -> None:
@@ -306,7 +280,7 @@ class GCS:
                 node.close()
             except Exception:
                 log.exception("flush_failed", sysid=node.sysid)
-        self.signing_writer.flush()
+        self.parts.signing_writer.flush()
         if self.signing.key is not None:
             try:
                 self.signing_manager.save(clean=True)
@@ -321,7 +295,7 @@ class GCS:
             tasks.append(tg.create_task(self._save_signing_timestamp(), name="signing"))
             await stop.wait()
             now = self.clock.now()
-            self.wake_time.now, self.wake_time.wall = now, self.clock.wall()
+            self.parts.wake_time.now, self.parts.wake_time.wall = now, self.clock.wall()
             for node in self.nodes:
                 node.shutdown(now)  # final answers go out while the links are still open
             await asyncio.sleep(0.05)  # let stream transports write them
@@ -342,7 +316,7 @@ class GCS:
         while True:
             await asyncio.sleep(SAVE_INTERVAL_S)
             with self.errors.guard("signing_save", self.clock.now()):
-                self.signing_writer.kick()  # written on the write-behind's worker thread
+                self.parts.signing_writer.kick()  # written on the write-behind's worker thread
                 if self.signing_manager.save_error:
                     log.error("signing_save_failed", error=self.signing_manager.save_error)
 
@@ -351,9 +325,9 @@ class GCS:
         while True:
             for _ in range(int(STATS_INTERVAL_S)):
                 await asyncio.sleep(1.0)
-                if self.tlog is not None:
+                if self.parts.tlog is not None:
                     with self.errors.guard("tlog", self.clock.now()):
-                        self.tlog.flush()
+                        self.parts.tlog.flush()
             with self.errors.guard("stats", self.clock.now()):
                 self._stats_pass(last)
 

@@ -109,8 +109,8 @@ def load_specs(state_dir: Path, configured: tuple[ChannelConfig, ...]) -> list[t
 
 
 class LiveChannels:
-    """The channel tasks of one GCS, and the channels added, removed and reloaded while it runs.
-    Reaches into the GCS's per-channel tables (a friend of gcs.py; see `GCS.attach`)."""
+    """The channel tasks of one Daemon, and the channels added, removed and reloaded while it runs.
+    Reaches into the Daemon's per-channel tables (a friend of daemon.py; see `Daemon.attach`)."""
 
     def __init__(self, gcs, restored: list[tuple[dict, ChannelConfig]]) -> None:
         self.gcs = gcs

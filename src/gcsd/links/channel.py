@@ -4,7 +4,7 @@ A channel has peers (each ground station of a udp-server, each TCP connection, t
 port or remote of a client channel). Bytes from a peer go through that peer's FrameParser.
 
 Receive, per frame, in this order (SPEC "Signing", "Channels"):
-1. `verify(frame)` (the GCS's signing check) comes before anything else looks at the frame.
+1. `receiver.verify(channel, frame)` (the ingress's signing check) comes before anything else looks at the frame.
    A frame that fails it is counted as a reject (`on_reject`) and changes nothing else: no
    peer, no route, no version, no activity, no packets_in.
 2. The frame is accepted from its peer: the peer's last-heard time, its output version, and
@@ -13,7 +13,7 @@ Receive, per frame, in this order (SPEC "Signing", "Channels"):
    from then on it only goes up, to MAVLink2 once the peer sends MAVLink2 (ArduPilot's rule),
    so one MAVLink1 station never changes what another gets. RADIO_STATUS and RADIO (a radio's
    own reports) count for nothing.
-3. `on_frame(channel, frame, now)`: routing and local handling.
+3. `receiver.on_frame(channel, frame, now)`: the ingress decision and its application (daemon.py).
 
 Steps 1-3 run inside the receive boundary (boundary.py): an exception in one frame's signing
 check, admission, routing or handling is counted under "receive" and the next frame goes on; a
@@ -49,7 +49,7 @@ from typing import Protocol
 from gcsd.boundary import ErrorCounts
 from gcsd.config import ChannelConfig
 from gcsd.links import unauth
-from gcsd.links.outbox import Outbox
+from gcsd.links.outbox import Outbox, WakeTime
 from gcsd.routing.filters import counters as gate_counters
 from gcsd.routing.filters import gates
 from gcsd.routing.router import ChannelPolicy
@@ -116,12 +116,57 @@ def _source_of(raw: bytes) -> int:
     return raw[5] if raw[0] == STX_V2 else raw[3]
 
 
-def _accept_all(frame: Frame) -> str | None:
-    return None
+class Receiver(Protocol):
+    """Where a channel's frames go (the daemon: routing/ingress.py decides, daemon.py applies)."""
+
+    def verify(self, channel: Channel, frame: Frame) -> str | None:
+        """The signing check: None (accepted) or why the frame is refused."""
+
+    def on_frame(self, channel: Channel, frame: Frame, now: float) -> None:
+        """An accepted frame: routing and local handling."""
+
+    def on_reject(self, channel: Channel, frame: Frame, reason: str, now: float) -> None:
+        """A frame that failed the signing check."""
+
+    def on_bad_crc(self, channel: Channel, raw: bytes, now: float) -> None:
+        """A bad-CRC frame on a forward_bad_crc channel, from an admitted peer."""
+
+    def on_peer_joined(self, channel: Channel, peer: Peer) -> None:
+        """A peer served for the first time."""
+
+
+class Unwired:
+    """A Receiver that accepts every frame and does nothing with it (tools; tests pass their own)."""
+
+    def verify(self, channel: Channel, frame: Frame) -> str | None:
+        return None
+
+    def on_frame(self, channel: Channel, frame: Frame, now: float) -> None:
+        pass
+
+    def on_reject(self, channel: Channel, frame: Frame, reason: str, now: float) -> None:
+        pass
+
+    def on_bad_crc(self, channel: Channel, raw: bytes, now: float) -> None:
+        pass
+
+    def on_peer_joined(self, channel: Channel, peer: Peer) -> None:
+        pass
 
 
 class Channel:
-    def __init__(self, index: int, config: ChannelConfig, clock: Callable[[], float] = time.monotonic) -> None:
+    outbox_class = Outbox  # a channel of another kind brings its own output (api/http/local.py)
+
+    def __init__(self, index: int, config: ChannelConfig, clock: Callable[[], float] = time.monotonic, *,
+                 receiver: Receiver | None = None, wake_time: WakeTime | None = None, signing=None,
+                 tlog=None, errors: ErrorCounts | None = None, wall: Callable[[], float] = time.time,
+                 signing_required: bool = False) -> None:
+        """`receiver`: where frames go (Unwired: nowhere); `wake_time`: the asyncio layer's time,
+        shared by the daemon's channels; `signing`, `tlog`, `errors`: the daemon's; `clock` and
+        `wall`: what the asyncio layer reads at a wake-up (it ticks the channel);
+        `signing_required`: signing.require (a tcp-server then serves a connection only after a
+        good signed frame, unless the channel is unsigned_ok)."""
+        receiver = receiver or Unwired()
         self.index = index
         self.config = config
         self.name = config.name
@@ -134,31 +179,30 @@ class Channel:
         self.max_peers = getattr(config, "max_peers", None) or DEFAULT_MAX_PEERS
         self._start_v1 = config.mavlink == 1
         # the output side: budget, encoders, signing stamp, tlog, the reply queue (outbox.py)
-        self.out = Outbox(index, config.bandwidth, self.stats, self.peers, "high_latency" not in config.options)
+        self.in_gate, out_gate = gates(config)  # companion routing (filters.py): None without filter/cap
+        self.out = self.outbox_class(index, config.bandwidth, self.stats, self.peers,
+                                     "high_latency" not in config.options, wake_time=wake_time,
+                                     signing=signing, tlog=tlog, gate=out_gate)
         self.local_address: tuple[str, int] | None = None
-        self.verify: Callable[[Frame], str | None] = _accept_all  # None: accepted, else the reject reason
-        self.on_frame: Callable[[Channel, Frame, float], None] = lambda channel, frame, now: None
-        self.on_reject: Callable[[Channel, Frame, str, float], None] = lambda channel, frame, reason, now: None
-        self.on_bad_crc: Callable[[Channel, bytes], None] = lambda channel, raw: None
-        self.on_peer_joined: Callable[[Channel, Peer], None] = lambda channel, peer: None
+        self.receiver = receiver
+        self.on_frame = receiver.on_frame  # bound once: called per frame
         self.make_writer: Callable[[object], PeerWriter] | None = None  # the transport's, for admitted strangers
-        self.serve_on_connect = True  # tcp-server: serve a connection before its first good frame
         self._keep_bad_crc = "forward_bad_crc" in config.options
         self._strangers = FrameParser(ParseStats(), keep_bad_crc=False)  # datagrams from unknown addresses
         # a signing gateway's own unsigned frames are accepted: they are what it signs (signgate.py)
         self.sign_forwarded = "sign_forwarded" in config.options
         self.unsigned_ok = "unsigned_ok" in config.options or self.sign_forwarded
-        self.wall: Callable[[], float] = time.time  # the asyncio layer's wall clock (it ticks the channel)
+        # tcp-server: serve a connection before its first good frame (TCP cannot be spoofed: no
+        # amplification), unless signatures are required on it
+        self.serve_on_connect = not (signing_required and not self.unsigned_ok)
         self.signature_reject_reasons: dict[str, int] = {}
-        self.errors = ErrorCounts()  # the daemon's, set by the composition root
+        self.errors = errors if errors is not None else ErrorCounts()
+        self.wall = wall
         self._retired = ParseStats()  # counters of peers that are gone
         self._rejected_frames = 0
         self._rejected_bytes = 0
         self._last_sweep_s = 0.0
-        # companion routing (filters.py): None when the channel has no filter / no rate cap
-        self.in_gate, self.out_gate = gates(config)
         self.dedup = config.group is not None  # same frames dropped (a group; all channels with routing.dedup_ms)
-        self.out.gate = self.out_gate
         self.retired = False  # removed at run time: its slot waits for the next added channel (livechannels.py)
         self.stream_requests = StreamRequests(config.request_streams) if config.request_streams else None
 
@@ -171,10 +215,11 @@ class Channel:
     def _new_parser(self) -> FrameParser:
         return FrameParser(ParseStats(), keep_bad_crc=self._keep_bad_crc)
 
-    def add_peer(self, key: object, write: PeerWriter, now: float | None = None) -> Peer:
-        """A peer served from the start (the remote of a client channel, a serial port)."""
+    def add_peer(self, key: object, write: PeerWriter, now: float | None = None, announce: bool = True) -> Peer:
+        """A peer served from the start (the remote of a client channel, a serial port); with
+        `announce`, the receiver hears that it joined (a channel's own permanent peer: not)."""
         peer = Peer(key, write, self.out.time.now if now is None else now, self._new_parser(), self._start_v1)
-        self._admit(peer)
+        self._admit(peer, announce)
         return peer
 
     def connect_peer(self, key: object, write: PeerWriter, close: Callable[[], None] | None = None) -> Peer:
@@ -200,7 +245,7 @@ class Channel:
         one of its frames is accepted."""
         return Peer(key, None, now, self._strangers, self._start_v1)
 
-    def _admit(self, peer: Peer) -> None:
+    def _admit(self, peer: Peer, announce: bool = True) -> None:
         if len(self.peers) >= self.max_peers:
             # a connection that never sent a good frame goes first (the oldest of the host holding
             # the most: a host opening connections in a loop pushes out its own), then the peer
@@ -221,7 +266,8 @@ class Channel:
         peer.admitted = True
         self.peers[peer.key] = peer
         self.out.v1_peers += peer.mavlink1
-        self.on_peer_joined(self, peer)
+        if announce:
+            self.receiver.on_peer_joined(self, peer)
 
     def _set_version(self, peer: Peer, mavlink1: bool) -> None:
         peer.heard = True
@@ -282,19 +328,19 @@ class Channel:
             bad, parser.bad_crc_frames = parser.bad_crc_frames, []
             if peer.admitted:  # never relay what an unknown source sent
                 for raw in bad:
-                    self.on_bad_crc(self, raw)
-        verify, on_frame, tlog, in_gate = self.verify, self.on_frame, self.out.tlog, self.in_gate
+                    self.receiver.on_bad_crc(self, raw, now)
+        verify, on_frame, tlog, in_gate = self.receiver.verify, self.on_frame, self.out.tlog, self.in_gate
         signing = self.out.signing  # without a key or `require`, every frame is accepted untouched
         checked = signing is None or signing.key is not None or signing.require
         for frame in frames:
             try:  # the receive boundary: one frame's failure is counted, the rest of the batch goes on
                 if tlog is not None:
                     tlog.record(frame.raw, self.out.time.wall)
-                reason = verify(frame) if checked else None
+                reason = verify(self, frame) if checked else None
                 if reason is not None:
                     self._rejected_frames += 1
                     self._rejected_bytes += len(frame.raw)
-                    self.on_reject(self, frame, reason, now)
+                    self.receiver.on_reject(self, frame, reason, now)
                     continue
                 if frame.msgid not in _NO_STATE:
                     peer.last_rx_s = now
@@ -370,7 +416,7 @@ class Channel:
         out["bytes_in"] -= self._rejected_bytes
         out["peers"] = len(self.peers)
         out["replies_dropped"] = self.out.replies_dropped
-        out.update(gate_counters(self.in_gate, self.out_gate))
+        out.update(gate_counters(self.in_gate, self.out.gate))
         for reason, n in self.signature_reject_reasons.items():
             out[f"signature_rejects_{reason}"] = n
         return out

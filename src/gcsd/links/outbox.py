@@ -74,17 +74,21 @@ class WakeTime:
 class Outbox:
     """The output side of one channel (its peers are the channel's, shared by reference)."""
 
-    def __init__(self, index: int, bandwidth: int | None, stats, peers: dict, output_enabled: bool = True) -> None:
+    def __init__(self, index: int, bandwidth: int | None, stats, peers: dict, output_enabled: bool = True, *,
+                 wake_time: WakeTime | None = None, signing=None, tlog=None, gate=None) -> None:
+        """`wake_time`: the daemon's, shared by every channel; `signing` (wire/signing.py) stamps
+        our messages, `tlog` records what goes out, `gate` (filters.OutGate: filter.out and rate
+        caps) may hold a forwarded frame back; each None when the daemon has none."""
         self.index = index
         self.stats = stats
         self.peers = peers
         self.v1_peers = 0  # peers that take MAVLink1 only (kept by the channel)
-        self.time = WakeTime()  # the daemon's, shared by every channel (compose.py)
+        self.time = wake_time or WakeTime()
         self.budget = TokenBucket(bandwidth, 0.0) if bandwidth else None
         self.output_enabled = output_enabled
-        self.gate = None  # filters.OutGate: filter.out and rate caps, None when the channel has neither
-        self.tlog = None
-        self.signing = None
+        self.gate = gate
+        self.tlog = tlog
+        self.signing = signing
         self._encoders: dict[tuple[int, int, bool], Encoder] = {}
         self.replies: deque[tuple[MAVLink_message, int, int]] = deque()
         self.replies_dropped = 0

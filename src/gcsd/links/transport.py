@@ -2,7 +2,7 @@
 
 Each channel runs `run_channel(channel, send_pass, wakeup, opened, on_error)`: it opens the
 transport (retrying with capped exponential backoff for clients and serial ports), then loops calling
-`send_pass(channel, now)` (the GCS's deferred scheduler pass), sleeping until the deadline it
+`send_pass(channel, now)` (the Daemon's deferred scheduler pass), sleeping until the deadline it
 returns or until `wakeup` is set (something was queued). Receiving happens in protocol
 callbacks, which hand bytes to `Channel.receive`.
 

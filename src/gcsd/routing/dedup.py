@@ -14,7 +14,7 @@ under a flood, `evicted` counts it) instead of memory growing. Expiry walks a FI
 O(1) amortised, no timer; `seen` compares times, so a key not yet swept is still expired.
 
 Uses:
-- Loop protection (gcs.py, on by default, LOOP_WINDOW_S): the router remembers every frame it
+- Loop protection (ingress.py, on by default, LOOP_WINDOW_S): the ingress remembers every frame it
   forwards; the same bytes arriving again within the window can only be a copy of a frame
   gcsd already passed on (a forwarding loop, or a second path to the same place), so they
   are dropped and counted (`loop_dropped`), neither routed nor handled again. gcsd forwards

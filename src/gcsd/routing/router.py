@@ -27,7 +27,7 @@ same systems (radio plus LTE to one flight controller). A route learned on one m
 on every member, so a frame that would go out on one goes out on all of them (those without a
 peer write nothing); nothing received on a member goes back out on any member of its group (the
 systems behind it already have it). The same frame arriving on two members is dropped by the
-GCS's dedup (dedup.py) before it gets here.
+ingress's dedup (ingress.py, dedup.py) before it gets here.
 
 Unknown message ids (no target field can be read) are forwarded as broadcasts and not processed,
 but only from a source already learned from good frames on the same channel: their CRC cannot be

@@ -11,6 +11,7 @@ from __future__ import annotations
 from pymavlink.dialects.v20 import ardupilotmega as _M
 
 HEARTBEAT = _M.MAVLINK_MSG_ID_HEARTBEAT  # 0
+SYSTEM_TIME = _M.MAVLINK_MSG_ID_SYSTEM_TIME  # 2
 RADIO_STATUS = _M.MAVLINK_MSG_ID_RADIO_STATUS  # 109
 RADIO = _M.MAVLINK_MSG_ID_RADIO  # 166
 RADIO_IDS = frozenset({RADIO_STATUS, RADIO})

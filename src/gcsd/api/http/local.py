@@ -37,6 +37,7 @@ from collections.abc import Awaitable, Callable
 from gcsd.config import ChannelConfig
 from gcsd.config.schema import LOCAL_TYPE
 from gcsd.links.channel import Channel
+from gcsd.links.outbox import Outbox
 from gcsd.wire.codec import Encoder, MAVLink_message
 
 PEER_KEY = "http-api"
@@ -46,22 +47,14 @@ def local_channel_config(name: str = "http") -> ChannelConfig:
     return ChannelConfig(name=name, type=LOCAL_TYPE, options=frozenset({"sign_forwarded"}))
 
 
-class LocalChannel(Channel):
-    def __init__(self, index: int, config: ChannelConfig, clock: Callable[[], float]) -> None:
-        super().__init__(index, config, clock)
+class LocalOutbox(Outbox):
+    """The API's output: our vehicles' messages to the sink unencoded, routed frames dropped, no
+    byte budget. Replies go out through `send_message` too (Outbox.reply)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
         self.sink: Callable[[int, int, int, MAVLink_message], None] = lambda sysid, compid, seq, msg: None
         self._out_seq: dict[tuple[int, int], int] = {}
-        self._injectors: dict[tuple[int, int], Encoder] = {}
-        self.add_peer(PEER_KEY, lambda raw: True)
-        # the outbox (outbox.py) writes what the daemon sends and replies here through these
-        self.out.write, self.out.send_message, self.out.has_room = self.write, self.send_message, self.has_room
-        self.opener: Callable[[], Awaitable[tuple]] | None = None  # the API's listener (HttpService.open)
-
-    async def open(self) -> tuple[Callable[[], None], asyncio.Future]:
-        """What `transport.run_channel` opens: the API's listening socket; raises OSError."""
-        if self.opener is None:
-            raise OSError("the HTTP API is not attached")
-        return await self.opener()
 
     def has_room(self, nbytes: int = 0) -> bool:
         return True
@@ -76,6 +69,30 @@ class LocalChannel(Channel):
         self.stats.packets_out += 1
         self.sink(sysid, compid, seq, msg)
         return True
+
+
+class LocalChannel(Channel):
+    outbox_class = LocalOutbox
+
+    def __init__(self, index: int, config: ChannelConfig, clock: Callable[[], float], **parts) -> None:
+        super().__init__(index, config, clock, **parts)
+        self._injectors: dict[tuple[int, int], Encoder] = {}
+        self.add_peer(PEER_KEY, lambda raw: True, announce=False)  # the API: there from the start
+        self.opener: Callable[[], Awaitable[tuple]] | None = None  # the API's listener (HttpService.open)
+
+    async def open(self) -> tuple[Callable[[], None], asyncio.Future]:
+        """What `transport.run_channel` opens: the API's listening socket; raises OSError."""
+        if self.opener is None:
+            raise OSError("the HTTP API is not attached")
+        return await self.opener()
+
+    @property
+    def sink(self) -> Callable[[int, int, int, MAVLink_message], None]:
+        return self.out.sink
+
+    @sink.setter
+    def sink(self, sink: Callable[[int, int, int, MAVLink_message], None]) -> None:
+        self.out.sink = sink
 
     def inject(self, sysid: int, compid: int, msg: MAVLink_message, now: float) -> None:
         """A message from an API client: into the daemon as if received on this channel."""
