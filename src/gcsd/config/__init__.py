@@ -37,6 +37,7 @@ from types import MappingProxyType
 import yaml
 from yaml.nodes import MappingNode, SequenceNode
 
+from gcsd.config.authority import read_channel_role, read_signing_keys
 from gcsd.config.can import read_can
 from gcsd.config.companion import (
     COMPANION_KEYS,
@@ -153,11 +154,12 @@ def _check_depth(text: str, filename: str) -> None:
 # --- the schema, one function per section -------------------------------------------------------
 
 _TOP_KEYS = ("vehicle", "state_dir", "params_file", "gcs", "mission", "ftp", "signing", "channels", "log",
-             "serial_control", "routing", "flight_logs", "can", "http")
+             "serial_control", "routing", "flight_logs", "can", "http", "metrics")
 _VEHICLE_KEYS = ("type", "sysid", "compid", "count", "home", "speedup", "camera", "gimbal")
 _MISSION_KEYS = ("max_items", "max_fence", "max_rally", "retry_ms")
 _CHANNEL_KEYS = ("name", "type", "address", "device", "baud", "mavlink", "streams", "options",
                  "private", "bandwidth", "max_peers", "broadcast", *MQTT_KEYS, *COMPANION_KEYS)
+# `role` is one of MQTT_KEYS: on other channels it is the authority role (config/authority.py)
 _SIGNING_KEY = re.compile(f"[0-9a-fA-F]{{{SIGNING_KEY_HEX_CHARS}}}")
 _ADDRESS = re.compile(r"(?:\[(?P<ipv6>[^\]\x00-\x1f]+)\]|(?P<host>[^:\s\[\]\x00-\x1f]+)):(?P<port>[0-9]{1,5})",
                       re.ASCII)
@@ -169,6 +171,7 @@ def _config(r: Reader, top: Section) -> Config:
     gcs = r.section(top["gcs"], ("sysid", "enforce_sysid"))
     params_file = r.path(top["params_file"], None, nullable=True)
     channels = _channels(r, top["channels"])
+    signing = _signing(r, r.section(top["signing"], ("key", "require", "keys")))
     return Config(
         vehicle=_vehicle(r, r.section(top["vehicle"], _VEHICLE_KEYS)),
         state_dir=Path(r.path(top["state_dir"], "./gcsd-state")),
@@ -179,7 +182,7 @@ def _config(r: Reader, top: Section) -> Config:
         ftp=FtpConfig(root=_ftp_root(r, ftp["root"]),
                       max_file_bytes=r.integer(ftp["max_file_bytes"], DEFAULT_FTP_MAX_FILE_BYTES, 1,
                                                MAX_FTP_FILE_BYTES)),
-        signing=_signing(r, r.section(top["signing"], ("key", "require"))),
+        signing=signing,
         channels=channels,
         log=LogConfig(level=r.choice(log["level"], "info", LOG_LEVELS),
                       format=r.choice(log["format"], "console", LOG_FORMATS),
@@ -188,7 +191,8 @@ def _config(r: Reader, top: Section) -> Config:
         routing=read_routing(r, top["routing"]),
         flight_logs=read_flight_logs(r, top["flight_logs"], [c.name for c in channels]),
         can=read_can(r, top["can"]),
-        http=read_http(r, top["http"], _address),
+        http=read_http(r, top["http"], _address, signing.require),
+        metrics=r.boolean(top["metrics"], True),
     )
 
 
@@ -266,7 +270,7 @@ def _signing(r: Reader, s: Section) -> SigningConfig:
         r.problem(s["key"], f"expected {SIGNING_KEY_HEX_CHARS} hex characters or null, got {got}")
         key = None
     return SigningConfig(key=None if key is None else bytes.fromhex(key),
-                         require=r.boolean(s["require"], False))
+                         require=r.boolean(s["require"], False), keys=read_signing_keys(r, s["keys"]))
 
 
 def _channels(r: Reader, f: Field) -> tuple[ChannelConfig, ...]:
@@ -367,6 +371,7 @@ def _channel(r: Reader, c: Section) -> ChannelConfig:
         max_peers=r.integer(c["max_peers"], DEFAULT_MAX_PEERS, 1, MAX_MAX_PEERS),
         broadcast=r.boolean(c["broadcast"], False),
         mqtt=read_mqtt(r, c, channel_type),
+        role=read_channel_role(r, c, channel_type),
     )
 
 

@@ -14,10 +14,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from gcsd.config.authority import read_anonymous_role, read_tokens
 from gcsd.config.companion import is_loopback_host
 from gcsd.config.reader import Field, Reader, is_null
 
-HTTP_KEYS = ("address", "token_file")
+HTTP_KEYS = ("address", "token_file", "tokens", "anonymous_role")
 DEFAULT_HTTP_ADDRESS = ("127.0.0.1", 8088)
 
 
@@ -25,9 +26,11 @@ DEFAULT_HTTP_ADDRESS = ("127.0.0.1", 8088)
 class HttpConfig:
     address: tuple[str, int] | None = DEFAULT_HTTP_ADDRESS  # None: no HTTP API
     token_file: str | None = None
+    tokens: tuple = ()  # NamedToken entries (config/authority.py), besides token_file (admin)
+    anonymous_role: str = "operator"  # a request without a token, on loopback (config/authority.py)
 
 
-def read_http(r: Reader, f: Field, read_address) -> HttpConfig:
+def read_http(r: Reader, f: Field, read_address, signing_require: bool = False) -> HttpConfig:
     section = r.section(f, HTTP_KEYS)
     address_field = section["address"]
     if address_field.node is not None and is_null(address_field.node):
@@ -40,7 +43,8 @@ def read_http(r: Reader, f: Field, read_address) -> HttpConfig:
     if address is not None and token_file is None and not is_loopback_host(address[0]):
         r.problem(address_field, f"{address[0]} is not a loopback address: set http.token_file too (the API "
                                  "can arm the vehicle)")
-    return HttpConfig(address=address, token_file=token_file)
+    return HttpConfig(address=address, token_file=token_file, tokens=read_tokens(r, section["tokens"]),
+                      anonymous_role=read_anonymous_role(r, section["anonymous_role"], signing_require))
 
 
 def read_token(path: str) -> str:

@@ -112,6 +112,8 @@ def read_mqtt(r, c, channel_type: str) -> MqttConfig | None:
     present = [key for key in MQTT_KEYS if key in c]
     if channel_type != "mqtt":
         for key in present:
+            if key == "role":  # the authority role there (config/authority.py)
+                continue
             r.problem(c[key], "only used by mqtt channels")
         return None
     for key in ("address", "device", "baud"):

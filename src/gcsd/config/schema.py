@@ -107,6 +107,7 @@ class FtpConfig:
 class SigningConfig:
     key: bytes | None = None
     require: bool = False
+    keys: tuple = ()  # NamedKey entries (config/authority.py): more keys, each with a role
 
 
 @dataclass(frozen=True)
@@ -130,6 +131,7 @@ class ChannelConfig:
     filter: ChannelFilter = field(default_factory=ChannelFilter)
     rate_limits: Mapping[int, float] = field(default_factory=dict)  # msgid -> Hz on this channel's output
     request_streams: int = 0  # Hz: REQUEST_DATA_STREAM to each autopilot learned here; 0: never
+    role: str = "admin"  # what an unsigned peer here may do (config/authority.py): today's, everything
 
     def __post_init__(self) -> None:
         if not self.bauds:
@@ -195,6 +197,7 @@ class Config:
     flight_logs: FlightLogsConfig = field(default_factory=FlightLogsConfig)
     can: CanConfig = field(default_factory=CanConfig)
     http: HttpConfig = field(default_factory=HttpConfig)  # config_http.py
+    metrics: bool = True  # GET /metrics on the HTTP port (gcsd.api.http.metrics)
     source: Source = field(default=Source(), compare=False, repr=False)
 
 
