@@ -279,3 +279,76 @@ def test_available_modes_on_a_spent_radio_budget_are_queued_not_lost(tmp_path):
     assert acks and acks[0].result == M.MAV_RESULT_ACCEPTED and answers.index(acks[0]) < answers.index(got[0])
     assert len(got) == len(h.node.vehicle.modes), "every mode, none lost"
     assert h.channel.snapshot()["replies_dropped"] == 0
+
+
+# --- every message ArduPilot maps (issue 27) ---------------------------------------------------
+
+# the 14 of the 36 Cockpit asks for at connect that were DENIED before issue 27
+COCKPIT_DENIED_BEFORE = ("SCALED_IMU3", "SCALED_PRESSURE2", "SCALED_PRESSURE3", "GPS_RTK", "GPS2_RAW", "GPS2_RTK",
+                         "PID_TUNING", "RANGEFINDER", "DISTANCE_SENSOR", "GIMBAL_DEVICE_ATTITUDE_STATUS",
+                         "OPTICAL_FLOW", "MAG_CAL_REPORT", "MAG_CAL_PROGRESS", "PARAM_VALUE")
+
+
+@pytest.mark.parametrize("name", COCKPIT_DENIED_BEFORE)
+def test_set_message_interval_is_accepted_for_every_message_cockpit_asks_for(h, name):
+    msgid = getattr(M, f"MAVLINK_MSG_ID_{name}")
+    assert h.command(SET, msgid, 200_000) == ACCEPTED
+    assert interval_us(h, msgid) == (ACCEPTED, (msgid, 200_000))
+
+
+def test_a_mapped_message_without_a_producer_is_accepted_and_nothing_of_it_is_sent(h):
+    """As an ArduPilot build without that sensor: ACCEPTED, the schedule kept, no frame."""
+    assert h.command(SET, M.MAVLINK_MSG_ID_GPS2_RAW, 100_000) == ACCEPTED
+    assert h.command(SET, ATTITUDE, 100_000) == ACCEPTED  # the positive control, same window
+    got = rates(h)
+    assert "GPS2_RAW" not in got and got["ATTITUDE"] == 10.0
+
+
+def test_an_id_ardupilot_does_not_map_is_still_denied(h):
+    assert h.command(SET, M.MAVLINK_MSG_ID_LOG_DATA, 100_000) == DENIED
+    assert h.command(SET, M.MAVLINK_MSG_ID_SCALED_IMU3, 100_000) == ACCEPTED
+
+
+def test_request_message_flight_information_is_answered_with_the_arming_time(h):
+    mark = h.mark()
+    assert h.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_FLIGHT_INFORMATION) == ACCEPTED
+    h.run(0.5, step=STEP_S)
+    (before,) = h.of_type("FLIGHT_INFORMATION", mark)
+    assert before.arming_time_utc == 0 and before.takeoff_time_utc == 0
+    assert h.arm() == ACCEPTED
+    armed_us = h.node.time_usec(h.t)
+    h.run(0.5, step=STEP_S)
+    mark = h.mark()
+    assert h.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_FLIGHT_INFORMATION) == ACCEPTED
+    h.run(0.5, step=STEP_S)
+    (after,) = h.of_type("FLIGHT_INFORMATION", mark)
+    assert abs(after.arming_time_utc - armed_us) <= 100_000  # microseconds since boot, as ArduPilot
+
+
+@pytest.fixture
+def companion(tmp_path) -> Harness:
+    h = Harness(tmp_path, vehicle="companion")
+    h.run(1.0, step=STEP_S)
+    return h
+
+
+def test_a_companion_streams_its_heartbeat_and_no_vehicle_telemetry(companion):
+    got = rates(companion)
+    assert got.get("HEARTBEAT") == 1.0  # the positive control
+    assert set(got) == {"HEARTBEAT"}, got
+    (hb, *_) = companion.of_type("HEARTBEAT")
+    assert (hb.type, hb.autopilot, hb.base_mode, hb.system_status) == (
+        M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, M.MAV_STATE_ACTIVE)
+
+
+def test_a_companion_sends_its_system_time_only_to_a_client_that_asks(companion):
+    assert companion.command(SET, M.MAVLINK_MSG_ID_SYSTEM_TIME, 500_000) == ACCEPTED
+    assert rates(companion)["SYSTEM_TIME"] == 2.0
+
+
+def test_a_companion_refuses_vehicle_telemetry_it_never_has(companion):
+    for name in ("GPS_RAW_INT", "ATTITUDE", "BATTERY_STATUS", "HOME_POSITION", "FLIGHT_INFORMATION"):
+        msgid = getattr(M, f"MAVLINK_MSG_ID_{name}")
+        assert companion.command(SET, msgid, 100_000) == DENIED, name
+        assert companion.command(M.MAV_CMD_REQUEST_MESSAGE, msgid) == FAILED, name
+    assert "GPS_RAW_INT" not in rates(companion)

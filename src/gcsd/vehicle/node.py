@@ -177,7 +177,8 @@ class VehicleNode:
         return sum(ch.stats.drops for ch in self.channels) & 0xFFFF
 
     def producible(self, msgid: int) -> bool:
-        return msgid in self.producers and self.vehicle.produces(msgid)
+        """Whether `msgid` goes into this vehicle's streams."""
+        return msgid in self.producers and self.vehicle.streams(msgid)
 
     def attach_link(self, channel: Channel, now: float) -> None:
         """A channel opened at run time (livechannels.py): a link in its place, at the SRn_ rates

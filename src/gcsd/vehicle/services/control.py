@@ -75,6 +75,7 @@ class ControlService(Service):
                 ctx.text(M.MAV_SEVERITY_CRITICAL, "Arm: Mode not armable")
                 return FAILED
         state.armed = True
+        state.armed_at_s = ctx.now()
         ctx.text(M.MAV_SEVERITY_INFO, "Arming motors")
         ctx.push(M.MAVLINK_MSG_ID_HEARTBEAT)
         return ACCEPTED

@@ -4,13 +4,17 @@ RADIO_STATUS slowdown. Behaviour as REFERENCE.md section 5:
 - REQUEST_DATA_STREAM sets a stream's rate on the link it came in on (start_stop 0 -> 0 Hz),
   re-bucketing all its messages (overriding earlier SET_MESSAGE_INTERVALs for them). Ignored
   on `no_stream_override` channels. No reply.
-- SET_MESSAGE_INTERVAL: param3 != 0 -> DENIED; unknown id -> DENIED; 0 -> default; -1 -> off;
+- SET_MESSAGE_INTERVAL: param3 != 0 -> DENIED; an id neither ArduPilot maps
+  (telemetry/ardupilot_ids.py) nor gcsd produces, or one this vehicle never sends (a companion's
+  GPS_RAW_INT), -> DENIED; a mapped id without a producer is ACCEPTED and sends nothing, as an
+  ArduPilot build without that feature; 0 -> default; -1 -> off;
   other negative -> DENIED; 1..999 us -> 1 ms; > 60 s -> 60 s; faster than the 3 ms cap ->
   DENIED with a STATUSTEXT. `no_stream_override` channels answer DENIED (the request is not
   honoured, and the ground station is told so).
-- GET_MESSAGE_INTERVAL: unknown id -> MESSAGE_INTERVAL(id, 0) + FAILED; not scheduled ->
+- GET_MESSAGE_INTERVAL: an id SET_MESSAGE_INTERVAL refuses -> MESSAGE_INTERVAL(id, 0) + FAILED; not scheduled ->
   (id, -1) + ACCEPTED; else (id, interval_us) + ACCEPTED. REQUEST_MESSAGE(244, id) is the same.
-- REQUEST_MESSAGE pushes one copy of the message on this link; unknown id -> FAILED.
+- REQUEST_MESSAGE pushes one copy of the message on this link (FLIGHT_INFORMATION included, as
+  ArduPilot); an id without a producer, or one this vehicle never sends -> FAILED.
 - RADIO_STATUS txbuf adjusts the link's stream slowdown as ArduPilot's handle_radio_status.
 """
 
@@ -21,6 +25,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 from gcsd.links.scheduler import MAX_INTERVAL_MS
 from gcsd.vehicle.services import Incoming, Service
 from gcsd.vehicle.services.commands import CommandRequest
+from gcsd.vehicle.telemetry.ardupilot_ids import ARDUPILOT_MAPPED
 from gcsd.wire.msgids import ACCEPTED, DENIED, FAILED
 from gcsd.wire.streams import REQUEST_DATA_STREAM_IDS
 
@@ -29,6 +34,14 @@ class RatesService(Service):
     def __init__(self, ctx, producers) -> None:
         self.ctx = ctx
         self.producers = producers  # the ids that can be streamed or requested at all
+
+    def _schedulable(self, msgid: int) -> bool:
+        """SET/GET_MESSAGE_INTERVAL take it: ArduPilot maps it or gcsd produces it, and this
+        vehicle sends it at all."""
+        return (msgid in ARDUPILOT_MAPPED or msgid in self.producers) and self.ctx.vehicle.produces(msgid)
+
+    def _requestable(self, msgid: int) -> bool:
+        return msgid in self.producers and self.ctx.vehicle.produces(msgid)
 
     def commands(self):
         return {
@@ -64,7 +77,7 @@ class RatesService(Service):
     # --- commands --------------------------------------------------------------------------
     def set_message_interval(self, req: CommandRequest) -> int:
         msgid, interval_us = int(req.param1), req.param2
-        if req.param3 != 0 or msgid not in self.producers:
+        if req.param3 != 0 or not self._schedulable(msgid):
             return DENIED
         channel = req.inc.channel
         if "no_stream_override" in channel.config.options:
@@ -94,7 +107,7 @@ class RatesService(Service):
 
     def _report_interval(self, req: CommandRequest, msgid: int) -> int:
         channel = req.inc.channel
-        if msgid >= 65536 or msgid < 0 or msgid not in self.producers:
+        if msgid >= 65536 or msgid < 0 or not self._schedulable(msgid):
             self.ctx.reply(channel, M.MAVLink_message_interval_message(max(0, min(msgid, 65535)), 0))
             return FAILED
         interval_ms = self.ctx.link(channel).interval_ms(msgid)
@@ -106,7 +119,7 @@ class RatesService(Service):
         msgid = int(req.param1)
         if msgid == M.MAVLINK_MSG_ID_MESSAGE_INTERVAL:
             return self._report_interval(req, int(req.param2))
-        if msgid not in self.producers:
+        if not self._requestable(msgid):
             return FAILED
         self.ctx.link(req.inc.channel).push(msgid)
         return ACCEPTED

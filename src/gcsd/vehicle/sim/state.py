@@ -53,6 +53,8 @@ class VehicleState:
     airspeed_ms: float = 0.0
     throttle_pct: int = 0
     armed: bool = False
+    armed_at_s: float = 0.0  # when it was last armed (the node's clock), for FLIGHT_INFORMATION
+    takeoff_at_s: float | None = None  # when it left the ground (FLIGHT_INFORMATION keeps it)
     safety_on: bool = False  # MAV_CMD_DO_SET_SAFETY_SWITCH_STATE (pre-arm: "safety switch")
     mode: int = 0
     landed: Landed = Landed.ON_GROUND

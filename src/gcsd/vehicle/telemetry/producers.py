@@ -3,7 +3,8 @@
 `BASE_PRODUCERS[msgid](view, channel, now)` returns the message to send, or None when there is
 nothing to say (no home yet, a MAVLink2-only message on a MAVLink1 link...). Which ids a
 channel sends and how often is the scheduler's business; what they contain is decided here.
-A message id without a producer cannot be streamed or requested (SET_MESSAGE_INTERVAL: DENIED).
+A message id without a producer cannot be streamed or requested (REQUEST_MESSAGE: FAILED);
+SET_MESSAGE_INTERVAL takes it if ArduPilot maps it (ardupilot_ids.py) and sends nothing.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ def heartbeat(ctx, channel, now):
     s = ctx.state
     v = ctx.vehicle
     return M.MAVLink_heartbeat_message(
-        v.mav_type, M.MAV_AUTOPILOT_ARDUPILOTMEGA, v.base_mode(s), s.mode, system_status(ctx), 3
+        v.mav_type, v.autopilot, v.base_mode(s), s.mode, system_status(ctx), 3
     )
 
 
@@ -108,8 +109,9 @@ def system_time(ctx, channel, now):
 
 
 def battery_monitored(ctx) -> bool:
-    """BATT_MONITOR 0: no battery monitor, so no BATTERY_STATUS and no battery in SYS_STATUS."""
-    return "BATT_MONITOR" not in ctx.params or ctx.params.get("BATT_MONITOR") != 0
+    """BATT_MONITOR 0: no battery monitor, so no BATTERY_STATUS and no battery in SYS_STATUS; a
+    component without the parameter (a companion computer) has no battery either."""
+    return "BATT_MONITOR" in ctx.params and ctx.params.get("BATT_MONITOR") != 0
 
 
 def battery_status(ctx, channel, now):
@@ -241,6 +243,20 @@ def autopilot_version(ctx, channel, now):
     )
 
 
+def flight_information(ctx, channel, now):
+    """As ArduPilot's send_flight_information: times in microseconds since boot (the fields are
+    misnamed *_utc in MAVLink); the take-off time is noted when a send first sees the vehicle off
+    the ground and cleared when one sees it landed, as ArduPilot does."""
+    s = ctx.state
+    if s.on_ground:
+        s.takeoff_at_s = None
+    elif s.takeoff_at_s is None:
+        s.takeoff_at_s = now
+    arm_us = ctx.time_usec(s.armed_at_s) if s.armed else 0
+    takeoff_us = ctx.time_usec(s.takeoff_at_s) if s.takeoff_at_s is not None else 0
+    return M.MAVLink_flight_information_message(ctx.time_boot_ms(now), arm_us, takeoff_us, 0)
+
+
 def extended_sys_state(ctx, channel, now):
     return M.MAVLink_extended_sys_state_message(M.MAV_VTOL_STATE_UNDEFINED, int(ctx.state.landed))
 
@@ -275,4 +291,5 @@ BASE_PRODUCERS: dict[int, Producer] = {
     M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: gps_global_origin,
     M.MAVLINK_MSG_ID_AUTOPILOT_VERSION: autopilot_version,
     M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: extended_sys_state,
+    M.MAVLINK_MSG_ID_FLIGHT_INFORMATION: flight_information,
 }

@@ -69,6 +69,12 @@ class VehicleType:
     settings: Callable[[Callable[[str], float]], Settings] = lambda get: Settings()
     prearm_checks: tuple[Callable, ...] = ()
     not_produced: frozenset[int] = frozenset()  # message ids this vehicle never sends
+    # message ids kept out of its streams but sent when a client asks for them
+    # (SET_MESSAGE_INTERVAL, REQUEST_MESSAGE): a companion's SYS_STATUS, SYSTEM_TIME...
+    not_streamed: frozenset[int] = frozenset()
+    # HEARTBEAT.autopilot: MAV_AUTOPILOT_INVALID for a component that is no autopilot (a
+    # companion computer), which clients then never take for the vehicle
+    autopilot: int = M.MAV_AUTOPILOT_ARDUPILOTMEGA
     ardupilot_stream_rates: dict[str, int] = field(default_factory=dict)
     can_arm: bool = True  # a companion computer has nothing to arm
     # PREFLIGHT_CALIBRATION param4 1 (ArduPlane's / Rover's trim_radio): the sticks (by rc.STICKS
@@ -85,6 +91,8 @@ class VehicleType:
         return [version_string(self.firmware)] + self.banner_lines(get)
 
     def base_mode(self, state: VehicleState) -> int:
+        if self.autopilot == M.MAV_AUTOPILOT_INVALID:
+            return 0  # no modes, nothing armed: MAVLink's (and ArduPilot's) convention for a companion
         base = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
         if state.armed:
             base |= M.MAV_MODE_FLAG_SAFETY_ARMED
@@ -117,3 +125,7 @@ class VehicleType:
 
     def produces(self, msgid: int) -> bool:
         return msgid not in self.not_produced
+
+    def streams(self, msgid: int) -> bool:
+        """Whether `msgid` is in this vehicle's streams (SRn_, REQUEST_DATA_STREAM)."""
+        return msgid not in self.not_produced and msgid not in self.not_streamed

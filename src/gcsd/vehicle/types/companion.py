@@ -1,9 +1,16 @@
 """A companion computer: MAV_TYPE_ONBOARD_CONTROLLER, compid 191 by default.
 
-It offers its own component (parameters, FTP, signing, commands) beside a flight controller:
-it has no modes, nothing to arm and nothing that moves, so it sends no position, attitude,
-GPS, RC, servo or mission telemetry, and refuses ARM_DISARM (arming is the flight
-controller's business).
+It offers its own component (parameters, FTP, signing, commands, flight logs) beside a flight
+controller and says what it is as ArduPilot and MAVLink expect of a companion: HEARTBEAT
+autopilot MAV_AUTOPILOT_INVALID, base_mode 0, system_status ACTIVE, so MAVProxy, MAVSDK and
+QGroundControl take the flight controller as the vehicle (an ARDUPILOTMEGA heartbeat from
+1/191 made MAVProxy target it and MAVSDK flip its vehicle type: issue 27). It has no modes,
+nothing to arm and nothing that moves: it never sends position, attitude, GPS, RC, servo,
+battery, home or mission telemetry (NOT_PRODUCED; SET_MESSAGE_INTERVAL and REQUEST_MESSAGE for
+them are DENIED / FAILED), and refuses ARM_DISARM (arming is the flight controller's business).
+Its streams carry nothing but the HEARTBEAT: SYS_STATUS, POWER_STATUS, MEMINFO and SYSTEM_TIME,
+which ArduPilot would forward to every ground station as a second vehicle's, go out only to a
+client that asks the companion's component for them (NOT_STREAMED).
 """
 
 from pymavlink.dialects.v20 import ardupilotmega as M
@@ -19,7 +26,16 @@ NOT_PRODUCED = frozenset({
     M.MAVLINK_MSG_ID_WIND, M.MAVLINK_MSG_ID_EKF_STATUS_REPORT, M.MAVLINK_MSG_ID_VIBRATION,
     M.MAVLINK_MSG_ID_BATTERY_STATUS, M.MAVLINK_MSG_ID_HOME_POSITION, M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN,
     M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, M.MAVLINK_MSG_ID_POSITION_TARGET_GLOBAL_INT,
-    M.MAVLINK_MSG_ID_FENCE_STATUS, M.MAVLINK_MSG_ID_HIGH_LATENCY2,
+    M.MAVLINK_MSG_ID_FENCE_STATUS, M.MAVLINK_MSG_ID_HIGH_LATENCY2, M.MAVLINK_MSG_ID_SCALED_IMU3,
+    M.MAVLINK_MSG_ID_SCALED_PRESSURE2, M.MAVLINK_MSG_ID_SCALED_PRESSURE3, M.MAVLINK_MSG_ID_GPS2_RAW,
+    M.MAVLINK_MSG_ID_GPS_RTK, M.MAVLINK_MSG_ID_GPS2_RTK, M.MAVLINK_MSG_ID_RANGEFINDER,
+    M.MAVLINK_MSG_ID_DISTANCE_SENSOR, M.MAVLINK_MSG_ID_OPTICAL_FLOW, M.MAVLINK_MSG_ID_PID_TUNING,
+    M.MAVLINK_MSG_ID_FLIGHT_INFORMATION,
+})
+
+NOT_STREAMED = frozenset({
+    M.MAVLINK_MSG_ID_SYS_STATUS, M.MAVLINK_MSG_ID_POWER_STATUS, M.MAVLINK_MSG_ID_MEMINFO,
+    M.MAVLINK_MSG_ID_SYSTEM_TIME,
 })
 
 COMPANION = VehicleType(
@@ -29,5 +45,7 @@ COMPANION = VehicleType(
     initial_mode=0,
     capabilities=M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT,
     not_produced=NOT_PRODUCED,
+    not_streamed=NOT_STREAMED,
+    autopilot=M.MAV_AUTOPILOT_INVALID,
     can_arm=False,
 )

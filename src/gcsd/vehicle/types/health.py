@@ -53,7 +53,8 @@ class SensorProfile:
     modes: dict[str, int] | None = None  # mode name -> control bits enabled in it
     terrain: bool = False
     airspeed: bool = False
-    standby: str = "disarmed"  # HEARTBEAT STANDBY when: "landed" (copter), "on_ground" (plane), "HOLD" (rover)
+    standby: str = "disarmed"  # HEARTBEAT STANDBY when: "landed" (copter), "on_ground" (plane), "HOLD"
+    # (rover), "never" (a companion computer: ACTIVE)
 
 
 def _modes(**groups: tuple[str, ...]) -> dict[str, int]:
@@ -110,7 +111,7 @@ SUB = SensorProfile(  # ArduSub: like a copter without terrain or propulsion bit
 BLIMP = SensorProfile(always=IMU | OUTPUTS, control=RATE | ATTITUDE | YAW | XY | Z,
                       modes=_modes(all=("VELOCITY", "LOITER", "RTL")))
 TRACKER = SensorProfile(always=IMU | OUTPUTS, control=YAW, modes={"AUTO": YAW, "SCAN": YAW, "GUIDED": YAW})
-COMPANION = SensorProfile(always=0, control=0, modes={})
+COMPANION = SensorProfile(always=0, control=0, modes={}, standby="never")  # a companion: always ACTIVE
 PROFILES = {"copter": COPTER, "plane": PLANE, "rover": ROVER, "sub": SUB, "blimp": BLIMP, "tracker": TRACKER,
             "companion": COMPANION}
 
@@ -192,6 +193,8 @@ def system_status(ctx) -> int:
     if s.failsafe is not None and (s.armed or not s.on_ground):
         return M.MAV_STATE_CRITICAL
     standby = PROFILES.get(ctx.vehicle.name, COMPANION).standby
+    if standby == "never":
+        return M.MAV_STATE_ACTIVE
     if standby == "landed":
         return M.MAV_STATE_STANDBY if s.on_ground else M.MAV_STATE_ACTIVE
     if standby == "HOLD":
