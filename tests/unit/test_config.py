@@ -195,7 +195,7 @@ BAD_CONFIGS = [
     ("vehicle:\n  sysdi: 2\n", "gcsd.yaml:2: vehicle.sysdi: unknown key; did you mean 'sysid'?"),
     ("chanels: []\n", "gcsd.yaml:1: chanels: unknown key; did you mean 'channels'?"),
     ("colour: red\n", ("gcsd.yaml:1: colour: unknown key (known keys: vehicle, state_dir, params_file, gcs, "
-                       "mission, ftp, signing, channels, log, serial_control, routing, flight_logs, can, http)")),
+                       "mission, ftp, signing, channels, log, serial_control, routing, flight_logs, can, http, metrics)")),
     ("vehicle: {sysid: 1, sysid: 2}\n", "gcsd.yaml:1: vehicle.sysid: duplicate key"),
     ("vehicle: copter\n", "gcsd.yaml:1: vehicle: expected a mapping, got 'copter'"),
     ("vehicle: {type: coptr}\n", ("gcsd.yaml:1: vehicle.type: expected copter|plane|rover|sub|tracker|blimp|"

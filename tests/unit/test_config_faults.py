@@ -170,7 +170,7 @@ def test_an_alias_bomb_is_answered_at_once(here, capsys):
     code, problems = cli(["check-config", str(config)], capsys)
     assert code == 2 and time.monotonic() - start < 2.0
     assert problems[0] == f"{config}:1: a0: unknown key (known keys: vehicle, state_dir, params_file, gcs, " \
-                          "mission, ftp, signing, channels, log, serial_control, routing, flight_logs, can, http)"
+                          "mission, ftp, signing, channels, log, serial_control, routing, flight_logs, can, http, metrics)"
     assert any(p.endswith(": channels[0]: expected a mapping, got a list") for p in problems)
     assert any(p.endswith(": serial_control[8]: expected a mapping, got a list") for p in problems)
 

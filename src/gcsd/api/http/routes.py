@@ -19,6 +19,7 @@ Routes (each mavlink2rest route is also served without `/v1`, as mavlink2rest do
   POST /v1/vehicles/{sysid}/mode {"mode": NAME}, .../arm {}, .../disarm {}
   GET  /v1/logs, /v1/logs/{id}[?sysid=S]   the flight logs (gcsd.payloads.logs.listing), one log's file
   GET  /, /favicon.ico             the status page (gcsd.api.http.statuspage)
+  GET  /metrics                    Prometheus' text format (gcsd.api.http.metrics), unless `metrics: false`
 
 Errors are JSON `{"error": "..."}`: 400 malformed JSON (nested deeper than MAX_JSON_DEPTH
 included: checked before parsing), a bad message, or an id in a path that is not ASCII digits,
@@ -60,6 +61,7 @@ MAX_JSON_DEPTH = 64  # a .plan nests 8 deep; Python's parser recurses (Recursion
 BODY_TIMEOUT_S = 5.0
 API = web.AppKey("api", object)
 GUARD = web.AppKey("guard", Guard)
+METRICS = web.AppKey("metrics", object)  # gcsd.api.http.metrics.Metrics, built at the first scrape
 MAX_WEBSOCKETS = 64  # a client opening more gets 503: the daemon's work stays bounded
 API_VERSION = 0
 
@@ -155,11 +157,13 @@ def ascii_id(text: str) -> int | None:
     return int(text) if text.isascii() and text.isdigit() and len(text) <= 10 else None
 
 
-def build_app(api: Api, token: str | None = None, guard: Guard | None = None) -> web.Application:
+def build_app(api: Api, token: str | None = None, guard: Guard | None = None,
+              metrics: bool = True) -> web.Application:
     guard = guard or Guard(lambda: None, token=token is not None)
     app = web.Application(client_max_size=MAX_BODY_BYTES, middlewares=[_errors(api), _gate(token, guard)])
     app[API] = api
     app[GUARD] = guard
+    app[METRICS] = []
     r = app.router
     for prefix in ("/v1", ""):
         r.add_get(prefix + "/mavlink", mavlink_get)
@@ -179,6 +183,9 @@ def build_app(api: Api, token: str | None = None, guard: Guard | None = None) ->
     r.add_post("/v1/vehicles/{sysid}/disarm", disarm)
     r.add_get("/v1/logs", logs)
     r.add_get("/v1/logs/{id}", log_file)
+    if metrics:
+        r.add_get("/metrics", metrics_get)
+        app.on_cleanup.append(_stop_metrics)
     statuspage.install(app, lambda: api.status())  # /, /favicon.ico, /v1/ws/status
     return app
 
@@ -320,6 +327,24 @@ async def _drain(sub, ws: web.WebSocketResponse) -> None:
 
 
 # --- gcsd's own ------------------------------------------------------------------------------
+
+async def metrics_get(request: web.Request) -> web.Response:
+    built = request.app[METRICS]
+    if not built:  # prometheus_client is imported here, at the first scrape, not at start
+        from gcsd.api.http.metrics import Metrics
+
+        built.append(Metrics(request.app[API].status))
+        built[0].start()
+    body, content_type = built[0].exposition()
+    response = web.Response(body=body)
+    response.headers["Content-Type"] = content_type
+    return response
+
+
+async def _stop_metrics(app: web.Application) -> None:
+    for metrics in app[METRICS]:
+        metrics.stop()
+
 
 async def status(request: web.Request) -> web.Response:
     return _json(request.app[API].status())

@@ -120,7 +120,7 @@ class HttpService:
         http = self.config.http
         if self._runner is None:
             token = read_token(http.token_file) if http.token_file else None
-            self._runner = web.AppRunner(build_app(self.face, token, self.guard), access_log=None,
+            self._runner = web.AppRunner(build_app(self.face, token, self.guard, self.config.metrics), access_log=None,
                                          handle_signals=False, shutdown_timeout=SHUTDOWN_TIMEOUT_S,
                                          keepalive_timeout=KEEPALIVE_S)
             await self._runner.setup()
