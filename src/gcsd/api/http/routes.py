@@ -9,7 +9,8 @@ Routes (each mavlink2rest route is also served without `/v1`, as mavlink2rest do
   GET  /v1/mavlink[/PATH]          the message tree or any sub-path (gcsd.api.http.tree); 404 if none
   POST /v1/mavlink                 {"header", "message"}: sent (Api.post); 200 with an empty body
   GET  /v1/helper/mavlink?name=N   a template (404 {"error": "Invalid message name."})
-  GET  /v1/ws/mavlink?filter=RE    WebSocket: frames out (gcsd.api.http.hub), messages in
+  GET  /v1/ws/mavlink?filter=RE&sysid=N&compid=M   WebSocket: frames out (gcsd.api.http.hub),
+                                   messages in; also at /mavlink2rest/ws/mavlink (BlueOS's proxy path)
   GET  /info                       mavlink2rest's service description (name "gcsd")
   GET  /v1/status                  `gcsd status --json`'s document
   GET  /v1/ws/status               WebSocket: the same document every second (gcsd.api.http.statuspage)
@@ -171,6 +172,7 @@ def build_app(api: Api, token: str | None = None, guard: Guard | None = None,
         r.add_post(prefix + "/mavlink", mavlink_post)
         r.add_get(prefix + "/helper/mavlink", helper)
         r.add_get(prefix + "/ws/mavlink", websocket)
+    r.add_get("/mavlink2rest/ws/mavlink", websocket)  # where Cockpit looks behind BlueOS's proxy
     r.add_get("/info", info)
     r.add_get("/v1/status", status)
     r.add_get("/v1/vehicles/{sysid}/parameters", parameters)
@@ -291,8 +293,15 @@ async def websocket(request: web.Request) -> web.StreamResponse:
     guard = request.app[GUARD]
     if len(api.hub.subscribers) >= MAX_WEBSOCKETS:
         raise RequestFailed(503, f"{MAX_WEBSOCKETS} WebSocket clients already; try again later")
+    ids = {}
+    for key, top in (("sysid", 255), ("compid", 255)):
+        text = request.query.get(key)
+        if text is not None:
+            ids[key] = ascii_id(text)
+            if ids[key] is None or ids[key] > top:
+                raise RequestFailed(400, f"{key} must be a number from 0 to {top}")
     try:
-        sub = api.hub.subscribe(request.query.get("filter", ".*"))
+        sub = api.hub.subscribe(request.query.get("filter", ".*"), **ids)
     except re.error as exc:
         raise RequestFailed(400, f"filter is not a regular expression: {exc}") from None
     ws = web.WebSocketResponse(heartbeat=30.0, max_msg_size=MAX_BODY_BYTES)
