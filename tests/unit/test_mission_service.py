@@ -81,3 +81,22 @@ def test_a_new_current_item_is_confirmed_by_mission_current_in_the_same_instant(
     assert h.of_type("MISSION_CURRENT", mark) == []
     h.run(5.0)
     assert h.of_type("MISSION_CURRENT", mark), "the control: the stream itself sends it"
+
+
+# --- a companion computer has no mission of its own (issue 27) --------------------------------
+
+def test_a_companion_has_no_mission_home_or_plan_of_its_own(tmp_path):
+    h = Harness(tmp_path, vehicle="companion")
+    node = h.node
+    mark = h.mark()
+    h.send(M.MAVLink_mission_request_list_message(node.sysid, node.compid, M.MAV_MISSION_TYPE_MISSION))
+    h.send(M.MAVLink_mission_request_list_message(node.sysid, 0, M.MAV_MISSION_TYPE_MISSION))
+    h.send(M.MAVLink_mission_request_int_message(node.sysid, node.compid, 0, M.MAV_MISSION_TYPE_MISSION))
+    h.send(M.MAVLink_mission_count_message(node.sysid, node.compid, 2, M.MAV_MISSION_TYPE_MISSION))
+    h.run(0.5)
+    acks = [m.type for m in h.of_type("MISSION_ACK", mark)]
+    assert acks == [M.MAV_MISSION_UNSUPPORTED] * 2, "one for each request addressed to the companion by name"
+    assert not h.of_type("MISSION_COUNT", mark) and not h.of_type("MISSION_ITEM_INT", mark), "no made-up home"
+    assert node.plans.read_plan(M.MAV_MISSION_TYPE_MISSION) is None
+    assert node.plans.write_plans({M.MAV_MISSION_TYPE_MISSION: ()}).result == M.MAV_MISSION_UNSUPPORTED
+    assert not node.capabilities() & M.MAV_PROTOCOL_CAPABILITY_MISSION_INT

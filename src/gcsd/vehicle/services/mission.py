@@ -1,7 +1,11 @@
 """Missions, fence and rally on a vehicle node: the thin adapter around three MissionTransfers.
 
 MISSION_* messages are routed by their mission_type to that type's machine (gcsd.vehicle.mission.transfer);
-an unknown type gets MISSION_ACK UNSUPPORTED (requests for items: silence, as in ArduPilot).
+an unknown type gets MISSION_ACK UNSUPPORTED (requests for items: silence, as in ArduPilot). A
+vehicle type without a mission of its own (`has_mission` False: a companion computer) serves no
+type at all and answers UNSUPPORTED only to requests addressed to its own component, so a
+ground station asking the whole system hears the flight controller alone and never a made-up
+home (issue 27).
 MAV_MISSION_TYPE_ALL in MISSION_CLEAR_ALL clears all three (the MAVLink spec's meaning; ArduPilot
 answers UNSUPPORTED): DENIED if another node is uploading any of them, else one ACK with type ALL.
 What the machines return is written out here: `Send` with `ctx.reply` on its channel, `Text` as
@@ -90,17 +94,22 @@ class MissionService(Service):
             self.mission.home_changed()
         retry_s = config.retry_ms / 1000.0
         self.rtt = RttTable(max_s=retry_s)  # starts at INITIAL_RTO_S, never beyond retry_ms
+        # a vehicle without a mission of its own (a companion computer) serves none: every plan
+        # is then an unsupported mission type (MISSION_ACK UNSUPPORTED to a request addressed to
+        # this component, nothing to one for the whole system, None to read_plan)
         self.transfers = {
             s.mission_type: MissionTransfer(s, retry_s=retry_s, slowdown_s=self._slowdown_s,
                                             queued_s=self._queued_s, rtt=self.rtt, lossy=_lossy)
             for s in stores
-        }
+        } if ctx.vehicle.has_mission else {}
         self.guided_handler: Callable[[MissionItem, int], bool] | None = None
         # the vehicle's hook for a new current item: (seq, reset jump counters and resume)
         self.current_changed: Callable[[int, bool], None] | None = None
         self.reached_seq: int | None = None
         self.complete = False
         self._slowed: set[int] = set()  # channel indices whose streams we slowed
+        if not self.transfers:
+            self.capabilities = 0  # AUTOPILOT_VERSION claims no mission protocol
 
     def commands(self):
         return {M.MAV_CMD_DO_SET_MISSION_CURRENT: self.do_set_mission_current}
@@ -168,7 +177,7 @@ class MissionService(Service):
     def handle_MISSION_CLEAR_ALL(self, inc: Incoming) -> None:
         mission_type = inc.msg.mission_type
         origin = self._origin(inc)
-        if mission_type != M.MAV_MISSION_TYPE_ALL:
+        if mission_type != M.MAV_MISSION_TYPE_ALL or not self.transfers:
             t = self._transfer(inc)
             if t is not None:
                 self._run(t.mission_clear_all(origin, inc.now))
@@ -253,6 +262,9 @@ class MissionService(Service):
     def write_plans(self, plans: dict[int, tuple[MissionItem, ...]]) -> Written:
         """Replace several plans (by mission type) all or none, each with the checks of an upload
         (gcsd.vehicle.mission.together); the refusal's reason is returned, not sent as text."""
+        missing = [t for t in plans if t not in self.transfers]
+        if missing:
+            return Written(M.MAV_MISSION_UNSUPPORTED, missing[0], "no mission on this component")
         written = write_together((self.transfers[t], items) for t, items in plans.items())
         self._run(written.outputs)
         return written
@@ -287,8 +299,8 @@ class MissionService(Service):
 
     def _transfer(self, inc: Incoming) -> MissionTransfer | None:
         t = self.transfers.get(inc.msg.mission_type)
-        if t is None:
-            self._ack(inc, M.MAV_MISSION_UNSUPPORTED)
+        if t is None and (self.ctx.vehicle.has_mission or inc.msg.target_component == self.ctx.compid):
+            self._ack(inc, M.MAV_MISSION_UNSUPPORTED)  # a companion: only when asked by name
         return t
 
     def _ack(self, inc: Incoming, result: int) -> None:

@@ -75,6 +75,9 @@ class VehicleType:
     # HEARTBEAT.autopilot: MAV_AUTOPILOT_INVALID for a component that is no autopilot (a
     # companion computer), which clients then never take for the vehicle
     autopilot: int = M.MAV_AUTOPILOT_ARDUPILOTMEGA
+    # False: no mission, fence, rally or home of its own (a companion computer: they are the
+    # flight controller's, and a default home would be a made-up one)
+    has_mission: bool = True
     ardupilot_stream_rates: dict[str, int] = field(default_factory=dict)
     can_arm: bool = True  # a companion computer has nothing to arm
     # PREFLIGHT_CALIBRATION param4 1 (ArduPlane's / Rover's trim_radio): the sticks (by rc.STICKS

@@ -10,7 +10,10 @@ battery, home or mission telemetry (NOT_PRODUCED; SET_MESSAGE_INTERVAL and REQUE
 them are DENIED / FAILED), and refuses ARM_DISARM (arming is the flight controller's business).
 Its streams carry nothing but the HEARTBEAT: SYS_STATUS, POWER_STATUS, MEMINFO and SYSTEM_TIME,
 which ArduPilot would forward to every ground station as a second vehicle's, go out only to a
-client that asks the companion's component for them (NOT_STREAMED).
+client that asks the companion's component for them (NOT_STREAMED). It has no mission, fence,
+rally point or home (`has_mission`): they are the flight controller's; a mission request
+addressed to the companion's component is answered MAV_MISSION_UNSUPPORTED, never with the
+default `vehicle.home` (services/mission.py).
 """
 
 from pymavlink.dialects.v20 import ardupilotmega as M
@@ -47,5 +50,6 @@ COMPANION = VehicleType(
     not_produced=NOT_PRODUCED,
     not_streamed=NOT_STREAMED,
     autopilot=M.MAV_AUTOPILOT_INVALID,
+    has_mission=False,
     can_arm=False,
 )
