@@ -339,3 +339,32 @@ def test_websocket_clients_are_bounded(api):
     status, taken = asyncio.run(body())
     assert status == 503 and taken == MAX_WEBSOCKETS
     assert call(f"{url}/v1/status")[0] == 200
+
+
+def cockpit_timesync(ts1: int) -> dict:
+    """Cockpit's latency probe as it posts it: TIMESYNC with current MAVLink's extension fields
+    target_system and target_component, which pymavlink's dialect lacks (issue 27)."""
+    return {"header": {"system_id": 255, "component_id": 240, "sequence": 0},
+            "message": {"type": "TIMESYNC", "tc1": 0, "ts1": ts1, "target_system": 1, "target_component": 1}}
+
+
+def test_cockpits_timesync_with_extension_fields_is_answered_over_http_and_the_websocket(api):
+    _, url, _ = api
+    status, _, body, _ = call(f"{url}/v1/mavlink", "POST", cockpit_timesync(1_234_567_000))
+    assert status == 200, body
+
+    def answered():
+        e = entry_now(url, "TIMESYNC")
+        return e if e and e["message"]["ts1"] == 1_234_567_000 else None
+
+    got = poll(answered, 5.0)
+    assert got and got["message"]["tc1"] > 0, "the vehicle's answer, in the tree"
+    ws = url.replace("http://", "ws://") + "/v1/ws/mavlink?filter=^TIMESYNC$"
+    frames = ws_frames(ws, 4, send=[cockpit_timesync(7_654_321_000)], timeout=3.0)  # ours and the answer
+    answers = [f for f in frames if f["header"]["system_id"] == 1 and f["message"]["ts1"] == 7_654_321_000]
+    assert answers and answers[0]["message"]["tc1"] > 0, frames
+    # a field current MAVLink does not have is still refused, by name
+    bad = cockpit_timesync(1)
+    bad["message"]["target_sys"] = 1
+    status, _, body, _ = call(f"{url}/v1/mavlink", "POST", bad)
+    assert status >= 400 and "target_sys" in body["error"]

@@ -227,3 +227,19 @@ def test_cockpit_set_position_target_reads():
                "x": 0, "y": 0, "z": -10, "vx": 0, "vy": 0, "vz": 0, "afx": 0, "afy": 0, "afz": 0, "yaw": 0, "yaw_rate": 0}
     msg = parse_message(cockpit)
     assert (msg.coordinate_frame, msg.type_mask, msg.z) == (M.MAV_FRAME_LOCAL_OFFSET_NED, 0x0FF8, -10.0)
+
+
+def test_extension_fields_pymavlink_lacks_are_accepted_and_carried_on_the_wire():
+    """Cockpit's TIMESYNC (issue 27): target_system and target_component follow tc1 and ts1 in
+    the MAVLink 2 payload; pymavlink's own parser still reads the base fields."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    from gcsd.api.http.mavjson import parse_message
+
+    msg = parse_message({"type": "TIMESYNC", "tc1": 0, "ts1": 99, "target_system": 1, "target_component": 190})
+    frame = msg.pack(mavlink.MAVLink(None, 255, 240))
+    assert frame[1] == 18 and frame[10 + 16:10 + 18] == bytes([1, 190])  # payload length, the extension bytes
+    assert mavlink.MAVLink(None).parse_char(bytearray(frame)).ts1 == 99
+    v1 = parse_message({"type": "TIMESYNC", "ts1": 5, "target_system": 1}).pack(
+        mavlink.MAVLink(None, 255, 240), force_mavlink1=True)
+    assert v1[1] == 16, "MAVLink 1 has no extension fields"

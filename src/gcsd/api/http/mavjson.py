@@ -22,11 +22,20 @@ value); an unknown field, a value of the wrong type, an integer out of its type'
 that is not finite or does not fit a float32, an enum entry from another enum: `BadMessage`
 naming the field. An unknown message name is `UnknownMessage` (404, "Invalid message name." as in
 mavlink2rest). Nothing here touches a socket or a clock.
+
+**Fields pymavlink's dialect lacks.** mavlink2rest reads and writes the current MAVLink
+definition; pymavlink's generated ardupilotmega is older and lacks the extension fields listed
+in EXTENSIONS (compared with mavlink/mavlink's message_definitions for issue 27: Cockpit's
+TIMESYNC carries `target_system` and `target_component`). They are accepted with the same checks
+as the other fields and carried on the wire: the message is packed with their bytes appended to
+its payload (MAVLink 2 extension fields follow the base fields; CRC_EXTRA does not cover them;
+a MAVLink 1 frame drops them, as the protocol does).
 """
 
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass
 from functools import cache
 
@@ -210,20 +219,80 @@ def parse_header(header: object) -> Header:
     return Header(*values)
 
 
+# message -> its extension fields of current MAVLink that pymavlink's dialect lacks, in wire
+# order: (name, struct code, C type, array length)
+EXTENSIONS: dict[str, tuple[tuple[str, str, str, int], ...]] = {
+    "TIMESYNC": (("target_system", "B", "uint8_t", 0), ("target_component", "B", "uint8_t", 0)),
+    "SERIAL_CONTROL": (("target_system", "B", "uint8_t", 0), ("target_component", "B", "uint8_t", 0)),
+    "MISSION_CURRENT": (("mission_id", "I", "uint32_t", 0), ("fence_id", "I", "uint32_t", 0),
+                        ("rally_points_id", "I", "uint32_t", 0)),
+    "MISSION_COUNT": (("opaque_id", "I", "uint32_t", 0),),
+    "MISSION_ACK": (("opaque_id", "I", "uint32_t", 0),),
+    "SET_ATTITUDE_TARGET": (("thrust_body", "f", "float", 3),),
+    "WIFI_CONFIG_AP": (("mode", "b", "int8_t", 0), ("response", "b", "int8_t", 0)),
+}
+
+
 def parse_message(message: object):
     """A message object (mavlink2rest's forms, see the module docstring) -> pymavlink message."""
     if not isinstance(message, dict):
         raise BadMessage("'message' must be an object with a 'type'")
     spec = spec_by_name(message.get("type"))
+    extensions = {e[0]: e for e in EXTENSIONS.get(spec.name, ())}
     for key in message:
-        if key != "type" and key not in spec.by_json:
+        if key != "type" and key not in spec.by_json and key not in extensions:
             raise BadMessage(f"{spec.name} has no field {key!r}")
     values = {}
     for f in spec.fields:
         raw = message.get(f.json_name)
         where = f"{spec.name}.{f.json_name}"
         values[f.name] = _default(f) if raw is None else _value(f, raw, where)
-    return spec.cls(*(values[name] for name in spec.arg_order))
+    msg = spec.cls(*(values[name] for name in spec.arg_order))
+    if extensions:
+        msg = _with_extensions(msg, spec.name, message)
+    return msg
+
+
+def _with_extensions(msg, name: str, message: dict):
+    """`msg` carrying the EXTENSIONS fields `message` gives (0 for those it leaves out)."""
+    parts, codes = [], ""
+    for field, code, base, length in EXTENSIONS[name]:
+        raw = message.get(field)
+        where = f"{name}.{field}"
+        if length:
+            f = FieldSpec(field, field, "floats" if code == "f" else "ints", base, length, None)
+            value = _default(f) if raw is None else _value(f, raw, where)
+            parts += list(value)
+        else:
+            kind = "float" if code == "f" else "int"
+            value = 0 if raw is None else _value(FieldSpec(field, field, kind, base, 0, None), raw, where)
+            parts.append(value)
+        setattr(msg, field, value)
+        codes += f"{length or ''}{code}"
+    msg.__class__ = _extended_class(type(msg))
+    msg._gcsd_extension_bytes = struct.pack("<" + codes, *parts)
+    return msg
+
+
+@cache
+def _extended_class(cls: type) -> type:
+    """`cls` whose pack() appends the message's extension bytes to the payload pymavlink packs."""
+
+    def pack(self, mav, force_mavlink1: bool = False) -> bytes:
+        if force_mavlink1:
+            return cls.pack(self, mav, force_mavlink1=True)
+        inner = self._pack
+
+        def with_extensions(mav_, crc_extra, payload, force_mavlink1=False):
+            return inner(mav_, crc_extra, payload + self._gcsd_extension_bytes, force_mavlink1=force_mavlink1)
+
+        self._pack = with_extensions
+        try:
+            return cls.pack(self, mav)
+        finally:
+            del self._pack
+
+    return type(cls.__name__, (cls,), {"pack": pack})
 
 
 def _default(f: FieldSpec):
