@@ -1,7 +1,7 @@
 """Launching the routers under test (gcsd, mavlink-router, MAVProxy), free ports, and /proc sampling.
 
 gcsd runs as ``[sys.executable, "-m", "gcsd", "run", "-c", CFG]`` (optionally under cProfile);
-mavlink-router (C++, built from source: bench/README.md) as ``mavlink-routerd -c CONF`` with two
+mavlink-router (C++, the binary from $GCSD_MAVLINK_ROUTER: bench/README.md) as ``mavlink-routerd -c CONF`` with two
 UDP endpoints in server mode, the equivalent of gcsd's two ``udp-server`` channels (each answers
 the address it last heard from; a targeted frame goes where its target system was seen), TCP
 server off, log level warning; the binary is ``$GCSD_MAVLINK_ROUTER`` or ``mavlink-routerd`` on
@@ -250,7 +250,7 @@ def mavlink_router_binary() -> tuple[str | None, str]:
     found = shutil.which("mavlink-routerd")
     if found:
         return found, f"{found} (PATH)"
-    return None, f"mavlink-routerd not found: set {MAVLINK_ROUTER_ENV} (build steps in bench/README.md)"
+    return None, f"mavlink-routerd not found: set {MAVLINK_ROUTER_ENV} (mavlink-router built from its public source: bench/README.md)"
 
 
 def mavlink_router_version(binary: str) -> str:

@@ -37,6 +37,7 @@ if __package__ in (None, ""):  # run as a script: python bench/run.py
     sys.path.insert(0, str(FsPath(__file__).resolve().parent.parent))
 
 from bench import companion as bench_companion
+from bench import companion_load as bench_companion_load
 from bench import fleet as bench_fleet
 from bench import ftp as bench_ftp
 from bench import http as bench_http
@@ -68,7 +69,7 @@ from bench.routers import (
 )
 
 WHAT = ("harness", "throughput", "latency", "vehicle", "params", "param_flood", "mission", "signing", "swarm", "http",
-        "ftp", "fleet", "lossy", "logs", "companion", "routes")
+        "ftp", "fleet", "lossy", "logs", "companion", "routes", "companion_load")
 ROUTERS = {"gcsd": "gcsd", "mavlink-router": "mavlink-router", "mavproxy": "MAVProxy"}  # name -> column
 LATENCY_RATE = 1000
 
@@ -247,7 +248,7 @@ class Runner:
                 a.routers = [r for r in a.routers if r != "gcsd"]
                 a.what -= {"vehicle", "params", "param_flood", "mission", "signing", "ftp", "logs"}
                 log(f"gcsd not runnable: {text}")
-        if "mavlink-router" in a.routers and a.what & {"throughput", "latency", "routes"}:
+        if "mavlink-router" in a.routers and a.what & {"throughput", "latency", "routes", "companion_load"}:
             self.mavlink_router, how = mavlink_router_binary()
             if self.mavlink_router is None:
                 self.notes.append(f"mavlink-router skipped: {how}")
@@ -284,6 +285,8 @@ class Runner:
             self.res["companion"] = bench_companion.measure_gates(self)
         if "routes" in a.what:  # bench/routes.py: 20 against 250 learned routes, gcsd and mavlink-router
             self.res["routes"] = bench_routes.measure_routes(self)
+        if "companion_load" in a.what:  # bench/companion_load.py: a companion's load against mavlink-router
+            self.res["companion_load"] = bench_companion_load.measure_load(self)
         if "logs" in a.what:  # bench/logs.py: 10 MB log download, capture at 921 600 baud
             self.res["logs"] = bench_logs.measure(self.workdir / "logs", self.a.quick, getattr(self, "gcsd_env", None))
 
@@ -488,6 +491,8 @@ class Runner:
             out += ["", bench_companion.table(self.res["companion"])]
         if self.res.get("routes"):
             out += ["", bench_routes.table(self.res["routes"])]
+        if self.res.get("companion_load"):
+            out += ["", bench_companion_load.table(self.res["companion_load"])]
         if self.res.get("logs"):
             out += ["", "Flight logs: 10 MB log download (LOG_REQUEST_DATA), capture at 921 600 baud (bench/logs.py)",
                     "", bench_logs.table(self.res["logs"])]
