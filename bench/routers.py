@@ -170,7 +170,7 @@ def export_gcsd_rev(repo: Path, rev: str, dest: Path) -> tuple[Path, str]:
     if has_setup:
         built = subprocess.run([sys.executable, "setup.py", "-q", "build_ext", "--inplace"], cwd=dest,
                                capture_output=True, check=False)
-        compiled = built.returncode == 0 and any((dest / "src" / "gcsd").glob("_speedups*.so"))
+        compiled = built.returncode == 0 and any((dest / "src" / "gcsd").glob("**/_speedups*.so"))
         what += ", gcsd.wire._speedups compiled" if compiled else ", pure Python (gcsd.wire._speedups not built)"
     return dest / "src", what
 
