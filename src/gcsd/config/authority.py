@@ -12,8 +12,8 @@ role, a role per channel for its unsigned peers, and the role of a tokenless HTT
         - {name: dashboard, token_file: tokens/dash.txt, role: observer}
       anonymous_role: null   # null: operator, or observer when signing.require is true
 
-A key or token file is named here and read at start (`read_key_file`, `read_passphrase_file`,
-http.read_token), relative paths under state_dir as every other file. Names are unique per list,
+A key or token file is named here and read at start (`read_key`, http.read_token; preflight
+checks them first), its path taken as given, as http.token_file's. Names are unique per list,
 printable ASCII without spaces (they go into the audit lines). On an mqtt channel `role` is
 the MQTT role (vehicle | ground, config/mqtt.py); its peers have the default role.
 """

@@ -30,6 +30,7 @@ import tempfile
 from pathlib import Path
 
 from gcsd.config import Config
+from gcsd.config.authority import read_key
 from gcsd.config.http import read_token
 
 
@@ -42,7 +43,28 @@ def check(config: Config) -> list[str]:
         problems += _params_file_content(config) or _swarm_sysid(config)
     if config.log.tlog:
         problems += _parent_can_be_made(config, "log.tlog", Path(config.log.tlog))
-    return problems + _token_file(config)
+    return problems + _token_file(config) + _key_files(config)
+
+
+def _key_files(config: Config) -> list[str]:
+    """signing.keys and http.tokens: each file readable, with a key / passphrase / token."""
+    problems = []
+    for i, named in enumerate(config.signing.keys):
+        which = "key_file" if named.key_file is not None else "passphrase_file"
+        try:
+            read_key(named, Path)
+        except (OSError, ValueError) as exc:
+            why = getattr(exc, "strerror", None) or exc
+            problems.append(f"{config.source.where(f'signing.keys[{i}].{which}')}: cannot read "
+                            f"{getattr(named, which)}: {why}")
+    for i, token in enumerate(config.http.tokens if config.http.address is not None else ()):
+        try:
+            read_token(token.token_file)
+        except (OSError, ValueError) as exc:
+            why = getattr(exc, "strerror", None) or exc
+            problems.append(f"{config.source.where(f'http.tokens[{i}].token_file')}: cannot read a token "
+                            f"from {token.token_file}: {why}")
+    return problems
 
 
 def _token_file(config: Config) -> list[str]:
@@ -60,7 +82,7 @@ def _token_file(config: Config) -> list[str]:
 def prepare(config: Config) -> list[str]:
     """Create state_dir, the vehicle directories, the FTP roots and the flight-log directories;
     problems if that fails."""
-    problems = _params_file(config) + _token_file(config)
+    problems = _params_file(config) + _token_file(config) + _key_files(config)
     if config.params_file is not None and not problems:
         problems += _swarm_sysid(config)
     if config.log.tlog:

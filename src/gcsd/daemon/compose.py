@@ -32,6 +32,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.api.http import wiring as http_wiring
 from gcsd.config import MAX_CHANNELS, ChannelConfig, Config
+from gcsd.config.authority import read_key
 from gcsd.config.mqtt import route_capacity
 from gcsd.config.schema import LOCAL_TYPE, mavlink_slot
 from gcsd.links.channel import Channel, Receiver
@@ -40,6 +41,7 @@ from gcsd.links.tlog import TlogWriter
 from gcsd.payloads import build as payload
 from gcsd.payloads.logs.wiring import flight_log_service, log_dir
 from gcsd.persist import WriteBehind
+from gcsd.routing.authority import ROLES
 from gcsd.routing.ingress import Ingress
 from gcsd.routing.router import MAX_ROUTES, Router, RouteTable
 from gcsd.vehicle import telemetry
@@ -62,7 +64,7 @@ from gcsd.vehicle.services.signing import SigningService
 from gcsd.vehicle.services.timesync import TimesyncService
 from gcsd.vehicle.sim.swarm import initial_state
 from gcsd.vehicle.types import vehicle_params, vehicle_type
-from gcsd.wire.signing import SigningManager, SigningStore
+from gcsd.wire.signing import SigningManager, SigningStore, StationKey
 from gcsd.wire.streams import PARAM_SUFFIX, STREAM_NAMES
 
 log = structlog.get_logger("gcsd.daemon.compose")
@@ -360,8 +362,15 @@ def build(config: Config, clock, errors, receiver, channels, wake_node, backend=
                     [ch.policy for ch in chans],
                     RouteTable(route_capacity((c.type for c in config.channels), MAX_ROUTES)))
     taps = [service.tap for n in nodes for service in n.services if hasattr(service, "tap")]
-    return Parts(signing_manager, signing_writer, tlog, wake_time, chans, nodes, router,
-                 Ingress(router, signing_manager.signing, config.routing.dedup_ms), taps, parts)
+    ingress = Ingress(router, signing_manager.signing, config.routing.dedup_ms)
+    signing_manager.signing.set_keys(station_keys(config))
+    ingress.set_roles([ROLES[ch.config.role] for ch in chans], bool(config.signing.keys))
+    return Parts(signing_manager, signing_writer, tlog, wake_time, chans, nodes, router, ingress, taps, parts)
+
+
+def station_keys(config: Config) -> tuple[StationKey, ...]:
+    """signing.keys read from their files (preflight has checked them)."""
+    return tuple(StationKey(k.name, read_key(k, Path), ROLES[k.role]) for k in config.signing.keys)
 
 
 def channel(parts: ChannelParts, index: int, config: ChannelConfig) -> Channel:

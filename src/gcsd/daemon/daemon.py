@@ -39,8 +39,11 @@ from gcsd.daemon import compose
 from gcsd.daemon.livechannels import LiveChannels, load_specs
 from gcsd.links.channel import Channel, Peer
 from gcsd.links.transport import ChannelStartError
+from gcsd.routing.authority import refusal_message, role_name
+from gcsd.routing.ingress import DENIED
 from gcsd.vehicle.autopilot.core import DEFAULT_SIM_PERIOD_S
 from gcsd.vehicle.node import VehicleNode
+from gcsd.vehicle.params.store import as_float
 from gcsd.wire.codec import Frame
 from gcsd.wire.msgids import HEARTBEAT as MSG_ID_HEARTBEAT
 from gcsd.wire.signing import SAVE_INTERVAL_S
@@ -143,6 +146,8 @@ class Daemon:
         fate = self.ingress.decide(channel, frame, now)
         if fate.drop is not None:
             setattr(channel.stats, fate.drop, getattr(channel.stats, fate.drop) + 1)
+            if fate.drop == DENIED:
+                self._refuse(channel, frame, fate.refuse)
             return
         for tap in self.taps:
             tap(channel, frame, now)
@@ -158,6 +163,27 @@ class Daemon:
                 node.handle(channel, frame, now)
                 for due in self._node_due:  # whatever it queued goes out at the next pass
                     due[node.index] = 0.0
+
+    def _refuse(self, channel: Channel, frame: Frame, kind: str | None) -> None:
+        """A denied frame (routing/authority.py): the protocol's refusal from the vehicle it was
+        meant for (or the first), and a log line with who."""
+        key = self.signing.verified_by
+        log.warning("denied", channel=channel.name, sysid=frame.sysid, compid=frame.compid, msg=frame.name,
+                    key=None if key is None else key.name, role=role_name(self.ingress.last_role))
+        nodes = self._nodes_for(frame.target_system, frame.target_component) or self.nodes
+        node = nodes[0]
+        msg = frame.msg if frame.known else None
+
+        def param(name: str):
+            entry = node.params.entry_by_name(name)
+            if entry is None:
+                return None
+            return M.MAVLink_param_value_message(entry.name.encode(), as_float(entry.value), entry.ptype,
+                                                 len(node.params), entry.index)
+
+        answer = refusal_message(kind, msg, frame.sysid, frame.compid, param)
+        if answer is not None:
+            node.reply(channel, answer)
 
     def _request_streams(self, channel: Channel, frame: Frame, now: float) -> None:
         """request_streams: REQUEST_DATA_STREAM to an autopilot first heard or rebooted (streamreq.py)."""

@@ -83,6 +83,7 @@ class ChannelStats:
     duplicates: int = 0  # the same frame again: a redundant link of a group, or routing.dedup_ms (dedup.py)
     open_failures: int = 0  # attempts to open the transport that failed (a device missing, a name not resolving)
     loop_dropped: int = 0  # frames that came back after gcsd had forwarded them (a forwarding loop, dedup.py)
+    denied: int = 0  # frames whose sender's role does not allow their message (routing/authority.py)
     unauthenticated_closed: int = 0  # connections closed before their first good frame (unauth.py)
     accept_failures: int = 0  # tcp-server accept() refused by the system (out of descriptors...; tcpserver.py)
 

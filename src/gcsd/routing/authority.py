@@ -150,3 +150,30 @@ def table() -> list[tuple[str, str]]:
              ("HTTP GET, WebSocket receive", "observer"), ("HTTP POST/PUT/DELETE, WebSocket send", "operator"),
              ("any other message (telemetry, requests, reads)", "observer")]
     return rows
+
+
+FTP_NAK = 129  # MAVLink FTP's NAK opcode
+FTP_ERROR_FAIL = 1
+
+
+def refusal_message(kind: str | None, msg, sysid: int, compid: int, param=None):
+    """The protocol's refusal of a denied, decoded message from (sysid, compid), or None (no
+    answer in the protocol, or nothing to answer with). `param(name) -> PARAM_VALUE | None`
+    gives the unchanged value for a denied PARAM_SET."""
+    if msg is None or kind is None:
+        return None
+    if kind == REFUSE_COMMAND:
+        return M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_DENIED, 0, 0, sysid, compid)
+    if kind == REFUSE_MISSION:
+        return M.MAVLink_mission_ack_message(sysid, compid, M.MAV_MISSION_DENIED, getattr(msg, "mission_type", 0))
+    if kind == REFUSE_PARAM:
+        name = msg.param_id.decode("ascii", "replace") if isinstance(msg.param_id, bytes) else msg.param_id
+        return None if param is None else param(name.rstrip("\0"))
+    if kind == REFUSE_FTP:
+        request = bytes(msg.payload)
+        seq = (int.from_bytes(request[0:2], "little") + 1) & 0xFFFF
+        header = seq.to_bytes(2, "little") + bytes((request[2], FTP_NAK, 1, request[3], 0, 0)) + bytes(4)
+        payload = header + bytes((FTP_ERROR_FAIL,))
+        return M.MAVLink_file_transfer_protocol_message(msg.target_network, sysid, compid,
+                                                        list(payload.ljust(251, b"\0")))
+    return None

@@ -32,6 +32,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
+from gcsd.routing.authority import ADMIN, OPERATOR, needs_decoding, refusal, required_for_frame
 from gcsd.routing.dedup import LOOP_WINDOW_S, RecentFrames
 from gcsd.routing.router import Router
 from gcsd.routing.signgate import signed_copy
@@ -57,10 +58,13 @@ class Fate:
     local: bool = False
     tap: bool = False
     streams: bool = False
+    refuse: str | None = None  # DENIED: the refusal the protocol answers with (authority.REFUSE_*)
 
 
 DUPLICATE = Fate("duplicates")
 LOOP = Fate("loop_dropped")
+DENIED = "denied"
+_DENIED_FATES = {}  # refusal -> Fate
 
 
 class Ingress:
@@ -76,6 +80,24 @@ class Ingress:
         self.dedup_all = dedup_ms > 0
         self.bad_crc_forwarded = 0
         self._fates: dict[tuple, Fate] = {}
+        self.roles_in_force = False
+        self._channel_roles: list[int] = []  # by channel index; missing: ADMIN
+        self.last_role = ADMIN  # the role decide() gave the last frame (for the audit of a denial)
+        self.denied = 0
+
+    def set_roles(self, channel_roles: list[int], station_keys: bool) -> None:
+        """Roles in force: each channel's role for its unsigned peers, and whether station keys
+        are configured (a role below ADMIN anywhere turns the check on)."""
+        self._channel_roles = list(channel_roles)
+        self.roles_in_force = station_keys or any(role < ADMIN for role in channel_roles)
+
+    def role_of(self, channel: Ingressing) -> int:
+        """The role of the frame just verified on `channel`: its key's, else the channel's."""
+        key = self.signing.verified_by
+        if key is not None:
+            return key.role
+        roles, index = self._channel_roles, channel.index
+        return roles[index] if index < len(roles) else ADMIN
 
     def verify(self, channel: Ingressing, frame: Frame, wall: float) -> str | None:
         """The signing check: None (accepted) or the reason the frame is refused."""
@@ -93,13 +115,21 @@ class Ingress:
         msgid = frame.msgid
         if index not in self.active and not is_radio(msgid):
             self.active.add(index)
+        role = ADMIN
+        if self.roles_in_force:
+            role = self.last_role = self.role_of(channel)
+            if role < ADMIN:
+                msg = frame.msg if frame.known and needs_decoding(msgid) else None
+                if role < required_for_frame(msgid, msg):
+                    self.denied += 1
+                    return self._denied(msgid)
         heartbeat = msgid == HEARTBEAT
         decision = self.router.decide(
             index, msgid, frame.sysid, frame.compid, frame.target_system, frame.target_component,
             now, self.active, frame.known, frame.msg.type if heartbeat and frame.known else None,
         )
         out = decision.out_channels
-        sign = bool(out) and channel.sign_forwarded and self.signing.key is not None
+        sign = bool(out) and channel.sign_forwarded and self.signing.key is not None and role >= OPERATOR
         streams = channel.stream_requests is not None and (heartbeat or msgid == SYSTEM_TIME)
         if out and not sign:
             self.loops.remember(raw, now)  # the bytes that go out: what a loop brings back
@@ -107,6 +137,14 @@ class Ingress:
         fate = self._fates.get(key)
         if fate is None:
             fate = self._fates[key] = Fate(None, out, sign, key[2], True, streams)
+        return fate
+
+    @staticmethod
+    def _denied(msgid: int) -> Fate:
+        kind = refusal(msgid)
+        fate = _DENIED_FATES.get(kind)
+        if fate is None:
+            fate = _DENIED_FATES[kind] = Fate(DENIED, tap=True, refuse=kind)
         return fate
 
     def signed(self, channel: Ingressing, raw: bytes, now: float, wall: float) -> bytes:

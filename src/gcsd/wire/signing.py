@@ -28,6 +28,13 @@ Incoming, per frame (`check`):
   there anyway, and a ground station whose key got out of step (MAVProxy switches keys even
   when a SETUP_SIGNING is refused) must not be locked out of the one link meant to fix it.
 
+Several keys (SPEC.md "Authority", `signing.keys`): a signed frame is checked against the key its
+stream (sysid, compid, link id) verified with last, and only if that fails against the others,
+so a station costs one HMAC per frame however many keys are configured. `verified_by` is the
+StationKey of the last accepted signed frame (the vehicle's own key: VEHICLE_KEY_NAME, role
+admin), None for a frame accepted unsigned; `set_keys` replaces the station keys at once (a
+revoked key's next frame is refused) and forgets which stream used which.
+
 Outgoing: `next_timestamp()` for each packet signed on a channel whose output is MAVLink2. It
 never passes MAX_TIMESTAMP (the 48-bit field's largest value), so no send can fail on it.
 
@@ -53,7 +60,7 @@ from __future__ import annotations
 
 import hashlib
 import hmac
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from gcsd.atomic import write_atomic
@@ -91,6 +98,19 @@ def timestamp_in_bounds(timestamp: int, wall_s: float) -> bool:
     return 0 <= timestamp <= MAX_TIMESTAMP
 
 
+VEHICLE_KEY_NAME = "vehicle"
+ADMIN_ROLE = 2  # routing/authority.py's ADMIN: the vehicle's own key may do everything
+
+
+@dataclass(frozen=True, slots=True)
+class StationKey:
+    """A named key and the role (routing/authority.py's integer) a frame signed with it gets."""
+
+    name: str
+    key: bytes = field(repr=False)
+    role: int
+
+
 def signature_of(key: bytes, frame_without_signature: bytes) -> bytes:
     return hashlib.sha256(key + frame_without_signature).digest()[:6]
 
@@ -102,11 +122,26 @@ class Signing:
         self.require = require
         self._streams: dict[tuple[int, int, int], int] = {}
         self._floor = floor  # a new stream must be above it: a forgotten stream's last, the saved one
+        self.station_keys: tuple[StationKey, ...] = ()
+        self._all_keys: tuple[StationKey, ...] = ()  # the vehicle's key first, then the stations'
+        self._stream_keys: dict[tuple[int, int, int], StationKey] = {}
+        self.verified_by: StationKey | None = None
+        self._rebuild_keys()
 
     @property
     def checks_needed(self) -> bool:
         """False when every frame is accepted untouched (no key, not required): the fast path."""
-        return self.key is not None or self.require
+        return self.key is not None or self.require or bool(self.station_keys)
+
+    def set_keys(self, keys: tuple[StationKey, ...]) -> None:
+        """The station keys (signing.keys, `gcsd keys`), in force from the next frame."""
+        self.station_keys = tuple(keys)
+        self._rebuild_keys()
+
+    def _rebuild_keys(self) -> None:
+        own = () if self.key is None else (StationKey(VEHICLE_KEY_NAME, self.key, ADMIN_ROLE),)
+        self._all_keys = own + self.station_keys
+        self._stream_keys.clear()
 
     def set_key(self, key: bytes | None, timestamp: int, wall_s: float) -> None:
         """SETUP_SIGNING: the key (None or 32 zero bytes: signing off) and the timestamp, assigned
@@ -116,6 +151,7 @@ class Signing:
             self._streams.clear()
             self._floor = 0
         self.key = key
+        self._rebuild_keys()
         taken = timestamp if timestamp_in_bounds(timestamp, wall_s) else 0
         self.timestamp = min(MAX_TIMESTAMP, max(wall_to_units(wall_s), taken))
 
@@ -127,25 +163,45 @@ class Signing:
               wall_s: float = 0.0) -> str | None:
         """None if the frame is accepted, else the reason it is refused. Only an accepted frame
         changes state (the stream table and the local timestamp)."""
+        self.verified_by = None
         signed = raw[0] == 0xFD and raw[2] & 0x01
         if not signed:
             if unsigned_ok or is_radio(msgid):
                 return None
             return UNSIGNED if self.require else None
         reason = self._check_signed(raw, sysid, compid, wall_s)
-        return None if unsigned_ok else reason
+        if reason is not None:
+            self.verified_by = None
+            return None if unsigned_ok else reason
+        return None
+
+    def _verifying_key(self, raw: bytes, stream: tuple[int, int, int]) -> StationKey | None:
+        """The key this frame is signed with: its stream's last first, then the others."""
+        body, signature = raw[:-6], raw[-6:]
+        known = self._stream_keys.get(stream)
+        if known is not None and hmac.compare_digest(signature_of(known.key, body), signature):
+            return known
+        for candidate in self._all_keys:
+            if candidate is not known and hmac.compare_digest(signature_of(candidate.key, body), signature):
+                return candidate
+        return None
 
     def _check_signed(self, raw: bytes, sysid: int, compid: int, wall_s: float) -> str | None:
-        key = self.key
-        if key is None:
+        if not self._all_keys:
             return NO_KEY if self.require else None
-        if not hmac.compare_digest(signature_of(key, raw[:-6]), raw[-6:]):
-            return BAD_SIGNATURE
         link_id = raw[-SIG_LEN]
+        stream = (sysid, compid, link_id)
+        if self.station_keys:
+            verified = self._verifying_key(raw, stream)
+            if verified is None:
+                return BAD_SIGNATURE
+        else:
+            verified = self._all_keys[0]
+            if not hmac.compare_digest(signature_of(verified.key, raw[:-6]), raw[-6:]):
+                return BAD_SIGNATURE
         ts = int.from_bytes(raw[-12:-6], "little")
         if wall_s >= SANE_WALL_CLOCK_S and ts > wall_to_units(wall_s + FUTURE_LIMIT_S):
             return FUTURE
-        stream = (sysid, compid, link_id)
         last = self._streams.get(stream)
         if last is None:
             if ts + WINDOW_UNITS < self.timestamp:
@@ -158,7 +214,12 @@ class Signing:
         elif ts <= last:
             return REPLAY
         self._streams[stream] = ts
+        if self.station_keys and self._stream_keys.get(stream) is not verified:
+            if len(self._stream_keys) >= MAX_STREAMS * 4:
+                self._stream_keys.clear()  # a memo only: rebuilt by the next frames
+            self._stream_keys[stream] = verified
         self.timestamp = max(self.timestamp, ts)
+        self.verified_by = verified
         return None
 
 
