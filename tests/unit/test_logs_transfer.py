@@ -10,6 +10,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from gcsd.payloads.logs.fastpack import LogData
 from gcsd.payloads.logs.store import LogEntry, LogStore
+from gcsd.payloads.logs.transfer import COUNT_MAX as COUNT
 from gcsd.payloads.logs.transfer import Chunk, EntryMsg, LogTransfer
 
 
@@ -188,3 +189,37 @@ def test_fast_log_data_packs_the_bytes_pymavlink_packs(data, v1, signed):
 
     slow = M.MAVLink_log_data_message(5, 123_456, len(data), data.ljust(90, b"\0")).pack(mav(), force_mavlink1=v1)
     assert LogData(5, 123_456, len(data), data).pack(mav(), force_mavlink1=v1) == slow
+
+
+# --- repeated requests and growing logs (issue 27) ----------------------------------------------
+
+def listed(t: LogTransfer, sizes: tuple[int, ...]) -> list[LogEntry]:
+    e = entries(*sizes)
+    t.request_list(e, 0, 0xFFFF)
+    serve(t, {})
+    return e
+
+
+def test_overlapping_and_repeated_requests_are_merged_not_sent_twice():
+    t = LogTransfer()
+    e = entries(10_000)
+    for ofs, count in [(0, 900), (450, 900), (1350, 90), (0, 90)]:
+        t.request_data(e, 1, ofs, count)
+    out = serve(t, {"00000001.BIN": bytes(10_000)})
+    assert [ofs for ofs, _ in out] == list(range(0, 1440, 90)), "each chunk once, in order"
+
+
+def test_a_log_that_grew_since_it_was_listed_is_served_up_to_its_listed_size():
+    t = LogTransfer()
+    e = listed(t, (1000,))
+    grown = [LogEntry(1, e[0].name, 5000, e[0].time_utc)]
+    t.request_data(grown, 1, 0, COUNT)
+    out = serve(t, {e[0].name: bytes(5000)})
+    assert sum(len(b) for _, b in out) == 1000 and len(out[-1][1]) < 90
+
+
+def test_a_listed_log_of_whole_chunks_still_ends_on_an_empty_chunk():
+    t = LogTransfer()
+    e = listed(t, (180,))
+    t.request_data(e, 1, 0, COUNT)
+    assert [(ofs, len(b)) for ofs, b in serve(t, {e[0].name: bytes(180)})] == [(0, 90), (90, 90), (180, 0)]

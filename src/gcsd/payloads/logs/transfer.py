@@ -13,7 +13,12 @@ States: IDLE, LISTING, SENDING.
   than 90 (the end of the file: 0 bytes at or past it) or the requested count reached ends that
   range. Further requests for the same log while sending are queued (up to MAX_RANGES; MAVProxy
   asks for up to 20 gaps at once; ArduPilot drops them), a request for another log replaces the
-  transfer; an id that is not a log ends it (as ArduPilot). After the last range: IDLE.
+  transfer; an id that is not a log ends it (as ArduPilot). After the last range: IDLE. A request
+  that overlaps or touches a queued range joins it (MAVProxy asks for the same gaps again after
+  each 0.7 s without data: nothing is queued twice; issue 27).
+- A log listed (LOG_REQUEST_LIST) is served up to the size its LOG_ENTRY gave, even if it grew
+  since (a log being captured): the range ends there on a short (or empty) chunk, so the
+  client's download ends at the size it was told.
 - LOG_REQUEST_END -> IDLE. LOG_ERASE is the service's (the files), and ends the transfer.
 No timeouts: a transfer ends by itself at the end of what was asked; a requester that went
 away costs at most the rest of that file, paced by the link.
@@ -59,6 +64,7 @@ class LogTransfer:
         self._id = 0
         self._name = ""
         self._ranges: deque[list[int]] = deque()  # [ofs, remaining]
+        self._listed: dict[str, int] = {}  # log name -> the size its LOG_ENTRY gave
 
     @property
     def busy(self) -> bool:
@@ -67,6 +73,7 @@ class LogTransfer:
     def request_list(self, entries: list[LogEntry], start: int, end: int) -> None:
         n = len(entries)
         self._ranges.clear()
+        self._listed = {e.name: e.size for e in entries}
         if n == 0:
             self._listing = deque([EntryMsg(0, 0, 0, 0, 0)])
         else:
@@ -83,9 +90,25 @@ class LogTransfer:
             self._ranges.clear()
         self._listing.clear()
         self._id, self._name = log_id, name
+        listed = self._listed.get(name)
+        if listed is not None:
+            count = max(0, min(count, listed - ofs))  # a growing log: what was listed (past it: an empty chunk)
+        self._queue(ofs, count)
+        self.state = "SENDING"
+
+    def _queue(self, ofs: int, count: int) -> None:
+        """Queue `count` bytes from `ofs`, joined to a queued range it overlaps or touches (an
+        empty range, the empty chunk at a log's end, stays on its own)."""
+        end = ofs + count
+        if count:
+            for r in self._ranges:
+                r_end = r[0] + r[1]
+                if r[1] and ofs <= r_end and end >= r[0]:
+                    start = min(r[0], ofs)
+                    r[0], r[1] = start, max(r_end, end) - start
+                    return
         if [ofs, count] not in self._ranges and len(self._ranges) < MAX_RANGES:
             self._ranges.append([ofs, count])
-        self.state = "SENDING"
 
     def end(self) -> None:
         self.state = "IDLE"
@@ -112,7 +135,8 @@ class LogTransfer:
         rng = self._ranges[0]
         rng[0] += nbytes
         rng[1] -= nbytes
-        if nbytes < DATA_BYTES or rng[1] <= 0:
+        # a range up to a listed log's end ends on a short (maybe empty) chunk, as the file's end would
+        if nbytes < DATA_BYTES or (rng[1] <= 0 and rng[0] != self._listed.get(self._name)):
             self._ranges.popleft()
             if not self._ranges:
                 self.state = "IDLE"
