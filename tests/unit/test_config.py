@@ -256,7 +256,7 @@ BAD_CONFIGS = [
     ("channels:\n  - name: ''\n    type: serial\n    device: /dev/ttyS0\n",
      "gcsd.yaml:2: channels[0].name: expected a non-empty string, got ''"),
     ("channels:\n  - name: gcs\n    type: udp\n    address: 0.0.0.0:1\n",
-     "gcsd.yaml:3: channels[0].type: expected udp-server|udp-client|tcp-server|tcp-client|serial|mqtt, got 'udp'"),
+     "gcsd.yaml:3: channels[0].type: expected udp-server|udp-client|tcp-server|tcp-client|serial|mqtt|websocket, got 'udp'"),
     ("channels:\n  - name: gcs\n    type: tcp-server\n",
      "gcsd.yaml:2: channels[0].address: required for type tcp-server"),
     ("channels:\n  - name: gcs\n    type: udp-server\n    address: foo\n",

@@ -339,8 +339,8 @@ def _channel(r: Reader, c: Section) -> ChannelConfig:
     address = device = None
     if "address" in c and serial:
         r.problem(c["address"], "not used by serial channels (use device and baud)")
-    elif "address" in c:
-        address = _address(r, c["address"])
+    elif "address" in c and not (channel_type == "websocket" and is_null(c["address"].node)):
+        address = _address(r, c["address"])  # a websocket channel's: null or absent, the HTTP port only
     elif network:
         r.problem(c["address"], f"required for type {channel_type}")
     for key in ("device", "baud"):

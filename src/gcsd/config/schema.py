@@ -24,7 +24,7 @@ from gcsd.wire.streams import STREAM_NAMES
 DEFAULT_STREAM_RATES_HZ = {"raw_sens": 2, "ext_stat": 2, "rc_chan": 5, "raw_ctrl": 0, "position": 2,
                            "extra1": 5, "extra2": 5, "extra3": 2, "params": 10, "adsb": 0}
 VEHICLE_TYPES = ("copter", "plane", "rover", "sub", "tracker", "blimp", "companion")
-CHANNEL_TYPES = ("udp-server", "udp-client", "tcp-server", "tcp-client", "serial", "mqtt")
+CHANNEL_TYPES = ("udp-server", "udp-client", "tcp-server", "tcp-client", "serial", "mqtt", "websocket")
 CHANNEL_OPTIONS = ("no_forward", "no_stream_override", "unsigned_ok", "forward_bad_crc", "high_latency",
                    "sign_forwarded")
 LOG_LEVELS = ("debug", "info", "warning", "error")

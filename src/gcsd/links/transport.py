@@ -278,6 +278,10 @@ async def _open(channel: Channel, baud: int | None = None):
             loop, lambda: _Stream(channel, key=cfg.device), cfg.device, baudrate=baud or cfg.baud
         )
         return transport.close, proto.closed
+    if kind == "websocket":  # clients come through the HTTP API's /v1/ws/raw and the channel's own listener
+        from gcsd.links import websocket
+
+        return await websocket.open_channel(channel)
     if kind == "mqtt":
         from gcsd.links import mqtt  # paho-mqtt is imported only by daemons that use a broker
 

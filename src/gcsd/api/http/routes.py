@@ -11,6 +11,8 @@ Routes (each mavlink2rest route is also served without `/v1`, as mavlink2rest do
   GET  /v1/helper/mavlink?name=N   a template (404 {"error": "Invalid message name."})
   GET  /v1/ws/mavlink?filter=RE&sysid=N&compid=M   WebSocket: frames out (gcsd.api.http.hub),
                                    messages in; also at /mavlink2rest/ws/mavlink (BlueOS's proxy path)
+  GET  /v1/ws/raw                  WebSocket: binary MAVLink 2, a peer of the websocket channel
+                                   (gcsd.links.websocket); 404 without one
   GET  /info                       mavlink2rest's service description (name "gcsd")
   GET  /v1/status                  `gcsd status --json`'s document
   GET  /v1/ws/status               WebSocket: the same document every second (gcsd.api.http.statuspage)
@@ -173,6 +175,7 @@ def build_app(api: Api, token: str | None = None, guard: Guard | None = None,
         r.add_get(prefix + "/helper/mavlink", helper)
         r.add_get(prefix + "/ws/mavlink", websocket)
     r.add_get("/mavlink2rest/ws/mavlink", websocket)  # where Cockpit looks behind BlueOS's proxy
+    r.add_get("/v1/ws/raw", raw_websocket)
     r.add_get("/info", info)
     r.add_get("/v1/status", status)
     r.add_get("/v1/vehicles/{sysid}/parameters", parameters)
@@ -324,6 +327,17 @@ async def websocket(request: web.Request) -> web.StreamResponse:
     finally:
         api.hub.unsubscribe(sub)
     return ws
+
+
+async def raw_websocket(request: web.Request) -> web.StreamResponse:
+    find = getattr(request.app[API], "raw_channel", None)
+    channel = find() if find is not None else None
+    if channel is None:
+        raise RequestFailed(404, "no websocket channel is configured")
+    from gcsd.links.websocket import Access, serve
+
+    guard = request.app[GUARD]
+    return await serve(channel, request, Access(None, guard.read_only, guard.count))
 
 
 async def _drain(sub, ws: web.WebSocketResponse) -> None:

@@ -18,8 +18,8 @@ MAX_CONNECTIONS + 1 for the API, gcsd.links.tcpserver): at most MAX_CONNECTIONS 
 beyond closes the oldest connection that has not yet sent a whole request head (an idle or a
 slow one: counted in `refused["idle_replaced"]`), so a client that asks is served whatever sits
 idle; when every connection is busy with a request, the new one is answered 503 and closed at
-once (`refused["connections"]`). At most ACCEPT_BATCH connections are accepted per wake-up,
-so a burst holds few descriptors beyond the cap before they are closed. A connection
+once (`refused["connections"]`). asyncio accepts up to ACCEPT_BACKLOG connections per wake-up
+before any is closed: the budget counts those too. A connection
 must deliver a whole request head within KEEPALIVE_S of being opened or of its last answer, and
 an idle keep-alive connection is closed after KEEPALIVE_S (aiohttp's keep-alive timer runs from
 the connection's start and cuts a connection still waiting for a head: slowloris included); a
@@ -49,7 +49,7 @@ log = structlog.get_logger("gcsd.api.http")
 SHUTDOWN_TIMEOUT_S = 1.0
 MAX_CONNECTIONS = 64 + 8  # clients, and the status page's two WebSockets and its fetches
 KEEPALIVE_S = 5.0
-ACCEPT_BATCH = 16  # asyncio accepts up to `backlog` connections per wake-up
+ACCEPT_BACKLOG = 128  # the listen backlog; asyncio also accepts up to this many per wake-up
 HEAD_END = b"\r\n\r\n"
 _REFUSED = (b"HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\nConnection: close\r\n"
             b"Content-Length: %d\r\n\r\n%s")
@@ -73,6 +73,7 @@ class HttpService:
         self._said_read_only = False
         self.face = Face(channel, gcs.nodes, self.status, gcs.errors, gcs.clock.now, gcs.clock.wall,
                          functools.partial(list_logs, config))
+        self.face.raw_channel = self.raw_channel  # /v1/ws/raw (gcsd.links.websocket)
 
     @classmethod
     def attach(cls, gcs) -> HttpService | None:
@@ -82,12 +83,29 @@ class HttpService:
             return None
         service = cls(gcs.config, channel, gcs)
         channel.opener = service.open
+        service.share_access(gcs.channels)
         # the daemon's descriptor budget with the API's share (gcsd.links.tcpserver): raised if short
         limit, needed = tcpserver.ensure_descriptor_budget(
-            tcpserver.descriptors_needed(gcs.config.channels, MAX_CONNECTIONS))
+            tcpserver.descriptors_needed(gcs.config.channels, MAX_CONNECTIONS + ACCEPT_BACKLOG))
         if limit < needed:
             log.warning("descriptor_budget_short", limit=limit, needed=needed, http_connections=MAX_CONNECTIONS)
         return service
+
+    def share_access(self, channels) -> None:
+        """The API's token and read-only rule for the websocket channels' own listeners."""
+        from gcsd.links.websocket import WEBSOCKET_TYPE, Access
+
+        try:
+            token = read_token(self.config.http.token_file) if self.config.http.token_file else None
+        except (OSError, ValueError):
+            token = "\x00unreadable"  # preflight refuses such a file; never an open listener
+        for ch in channels:
+            if ch.config.type == WEBSOCKET_TYPE:
+                ch.access = Access(token, self.read_only, self.guard.count)
+
+    def raw_channel(self):
+        """The websocket channel /v1/ws/raw serves (the first configured), or None."""
+        return next((ch for ch in self._channels if ch.config.type == "websocket" and not ch.retired), None)
 
     def status(self) -> dict:
         document = self._gcs_status()
@@ -128,7 +146,7 @@ class HttpService:
         host, port = http.address
         try:
             server = await asyncio.get_running_loop().create_server(
-                functools.partial(self._connection, runner), host, port, reuse_address=True, backlog=ACCEPT_BATCH)
+                functools.partial(self._connection, runner), host, port, reuse_address=True, backlog=ACCEPT_BACKLOG)
         except OSError as exc:
             self.listen_error = exc.strerror or str(exc)
             self._runner = None
