@@ -24,10 +24,10 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from gcsd.api.http.body import RequestFailed
 from gcsd.api.http.hub import Hub
 from gcsd.api.http.local import LocalChannel
 from gcsd.api.http.plan import PlanError, from_plan, to_plan
-from gcsd.api.http.routes import RequestFailed
 from gcsd.api.http.tree import MessageTree
 from gcsd.vehicle.params.store import to_type
 from gcsd.vehicle.services.mission import home_item

@@ -47,34 +47,24 @@ import hmac
 import json
 import math
 import re
-from itertools import accumulate
 from typing import Protocol
 
 from aiohttp import WSMsgType, web
 
 from gcsd.api.http import statuspage
+from gcsd.api.http.body import MAX_BODY_BYTES, RequestFailed, ascii_id, parse_json
 from gcsd.api.http.guard import READ_ONLY_TEXT, Guard
 from gcsd.api.http.hub import Hub
 from gcsd.api.http.mavjson import FLOAT32_MAX, BadMessage, UnknownMessage, parse_envelope, template
 from gcsd.api.http.plan import PlanError
 from gcsd.api.http.tree import MessageTree
 
-MAX_BODY_BYTES = 1 << 20
-MAX_JSON_DEPTH = 64  # a .plan nests 8 deep; Python's parser recurses (RecursionError near 1 000)
 BODY_TIMEOUT_S = 5.0
 API = web.AppKey("api", object)
 GUARD = web.AppKey("guard", Guard)
 METRICS = web.AppKey("metrics", object)  # gcsd.api.http.metrics.Metrics, built at the first scrape
 MAX_WEBSOCKETS = 64  # a client opening more gets 503: the daemon's work stays bounded
 API_VERSION = 0
-
-
-class RequestFailed(Exception):
-    """A handler's answer other than 2xx: status and the error text."""
-
-    def __init__(self, status: int, text: str) -> None:
-        super().__init__(text)
-        self.status = status
 
 
 class Vehicle(Protocol):
@@ -115,37 +105,6 @@ def error(status: int, text: str, headers: dict | None = None) -> web.Response:
                         headers=headers)
 
 
-def _reject_constant(name: str) -> None:
-    raise ValueError(f"{name} is not JSON")
-
-
-_STRING = re.compile(rb'"(?:[^"\\]++|\\.)*+"', re.DOTALL)
-_NOT_BRACKETS = bytes(b for b in range(256) if b not in b"[]{}")
-_STEP = [0] * 256
-_STEP[ord("[")] = _STEP[ord("{")] = 1
-_STEP[ord("]")] = _STEP[ord("}")] = -1
-
-
-def json_depth(data: bytes) -> int:
-    """How deep the arrays and objects of a JSON text nest, without parsing it (strings skipped)."""
-    brackets = _STRING.sub(b"", data).translate(None, _NOT_BRACKETS)
-    return max(accumulate(_STEP[b] for b in brackets), default=0)
-
-
-def parse_json(data: bytes | str) -> object:
-    """A client's JSON text, bounded before parsing: RequestFailed(400) for malformed or too deep."""
-    if isinstance(data, str):
-        data = data.encode("utf-8", "surrogatepass")
-    if len(data) > MAX_BODY_BYTES:
-        raise RequestFailed(413, f"body over {MAX_BODY_BYTES} bytes")
-    if json_depth(data) > MAX_JSON_DEPTH:
-        raise RequestFailed(400, f"malformed JSON: nested deeper than {MAX_JSON_DEPTH}")
-    try:
-        return json.loads(data, parse_constant=_reject_constant)
-    except (ValueError, UnicodeDecodeError, RecursionError) as exc:
-        raise RequestFailed(400, f"malformed JSON: {exc}") from None
-
-
 async def read_json(request: web.Request) -> object:
     try:
         body = await asyncio.wait_for(request.read(), BODY_TIMEOUT_S)  # 413 over client_max_size
@@ -153,11 +112,6 @@ async def read_json(request: web.Request) -> object:
         request.app[GUARD].count("body_timeout")
         raise RequestFailed(408, f"the body did not arrive within {BODY_TIMEOUT_S:g} s") from None
     return parse_json(body)
-
-
-def ascii_id(text: str) -> int | None:
-    """A decimal id from a path or a query (ASCII digits only: "²" passes str.isdigit())."""
-    return int(text) if text.isascii() and text.isdigit() and len(text) <= 10 else None
 
 
 def build_app(api: Api, token: str | None = None, guard: Guard | None = None,
